@@ -1,0 +1,1 @@
+"""The ``ppod`` command line: one module per subcommand, registered in :mod:`ppod_nodes.cli.main`."""

@@ -1,0 +1,1 @@
+"""Plumbing shared by every PPOD node: parameters, lifecycle base, diagnostics, QoS, main()."""

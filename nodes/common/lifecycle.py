@@ -1,0 +1,141 @@
+"""Base class of the PPOD lifecycle nodes.
+
+Nodes that own hardware follow the ROS 2 managed-node contract (STYLE.md rule 9):
+
+    unconfigured --configure--> inactive --activate--> active
+    active --deactivate--> inactive --cleanup--> unconfigured;  any --shutdown--> finalized
+
+* configure: read the declared parameters, build the frozen core config, open devices.
+* activate: start streaming (lifecycle publishers become active).
+* deactivate: stop streaming; hardware is brought to a safe state (e.g. ramp to zero).
+* cleanup: close devices.
+* shutdown: make hardware safe from any state; called on Ctrl-C / SIGTERM by :func:`run_node`.
+
+Subclasses implement ``on_configure_node(params)``, ``on_activate_node()``,
+``on_deactivate_node()``, ``on_cleanup_node()`` and ``on_shutdown_node()``. Core errors
+(:class:`ppod_ros.errors.PpodError`) turn into a FAILURE of the transition, a log line and an
+ERROR diagnostic; the node stays in its previous state. Other exceptions are bugs: they propagate.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rclpy.lifecycle import Node as LifecycleNode
+from rclpy.lifecycle import State, TransitionCallbackReturn
+
+from ppod_nodes.common import diagnostics as diag
+from ppod_nodes.common.params import Param, declare, read
+from ppod_ros.errors import PpodError
+
+#: Parameters every PPOD lifecycle node has.
+COMMON_PARAMS = (
+    Param("autostart", False, "configure and activate on start-up (when run without the launcher)"),
+)
+
+
+class PpodLifecycleNode(LifecycleNode):
+    """A lifecycle node with declared parameters, diagnostics and PpodError handling."""
+
+    #: The node's parameters (declared once, with descriptors).
+    PARAMS: tuple[Param, ...] = ()
+    #: hardware_id used in diagnostics.
+    HARDWARE_ID = "ppod"
+
+    def __init__(self, node_name: str, **kwargs: Any):
+        super().__init__(node_name, **kwargs)
+        declare(self, COMMON_PARAMS + tuple(self.PARAMS))
+        self.lifecycle_state = "unconfigured"
+        self.params: dict[str, Any] = {}
+        self.diagnostics = diag.Diagnostics(self, self.HARDWARE_ID)
+        self.diagnostics.set("lifecycle", diag.OK, "unconfigured")
+
+    # --------------------------------------------------------------- subclass hooks
+    def on_configure_node(self, params: dict[str, Any]) -> None:
+        """Build the core config from ``params`` and open resources. Raise PpodError to fail."""
+
+    def on_activate_node(self) -> None:
+        """Start streaming."""
+
+    def on_deactivate_node(self) -> None:
+        """Stop streaming; bring hardware to a safe state."""
+
+    def on_cleanup_node(self) -> None:
+        """Release what configure opened."""
+
+    def on_shutdown_node(self) -> None:
+        """Make hardware safe and release everything, from any state."""
+
+    # --------------------------------------------------------------- rclpy callbacks
+    def _run(self, transition: str, fn, new_state: str) -> TransitionCallbackReturn:
+        try:
+            fn()
+        except PpodError as exc:
+            self.get_logger().error(f"{transition} failed: {exc}")
+            self.diagnostics.set("lifecycle", diag.ERROR, f"{transition} failed: {exc}", state=self.lifecycle_state)
+            return TransitionCallbackReturn.FAILURE
+        self.lifecycle_state = new_state
+        self.diagnostics.set("lifecycle", diag.OK, new_state)
+        self.get_logger().info(f"{transition}: now {new_state}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_configure(self, state: State) -> TransitionCallbackReturn:
+        def configure() -> None:
+            self.params = read(self, self.PARAMS)
+            self.on_configure_node(self.params)
+
+        ret = self._run("configure", configure, "inactive")
+        return ret if ret != TransitionCallbackReturn.SUCCESS else super().on_configure(state)
+
+    def on_activate(self, state: State) -> TransitionCallbackReturn:
+        # Managed publishers first, so the node can publish from its activate hook.
+        ret = super().on_activate(state)
+        if ret != TransitionCallbackReturn.SUCCESS:
+            return ret
+        ret = self._run("activate", self.on_activate_node, "active")
+        if ret != TransitionCallbackReturn.SUCCESS:
+            super().on_deactivate(state)
+        return ret
+
+    def on_deactivate(self, state: State) -> TransitionCallbackReturn:
+        ret = self._run("deactivate", self.on_deactivate_node, "inactive")
+        super().on_deactivate(state)
+        return ret
+
+    def on_cleanup(self, state: State) -> TransitionCallbackReturn:
+        ret = self._run("cleanup", self.on_cleanup_node, "unconfigured")
+        return ret if ret != TransitionCallbackReturn.SUCCESS else super().on_cleanup(state)
+
+    def on_shutdown(self, state: State) -> TransitionCallbackReturn:
+        # Shutdown must always reach a safe state; a failure is logged but not retried.
+        self._run("shutdown", self.on_shutdown_node, "finalized")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: State) -> TransitionCallbackReturn:
+        self.get_logger().error(f"error during a transition from {state.label}; making hardware safe")
+        try:
+            self.on_shutdown_node()
+        except PpodError as exc:
+            self.get_logger().error(f"shutdown after error failed: {exc}")
+        self.lifecycle_state = "unconfigured"
+        self.diagnostics.set("lifecycle", diag.ERROR, f"error in transition from {state.label}")
+        return TransitionCallbackReturn.SUCCESS
+
+    # --------------------------------------------------------------- used by run_node
+    def autostart(self) -> bool:
+        """Configure and activate now if the ``autostart`` parameter is set; False if a step failed."""
+        if not self.get_parameter("autostart").value:
+            return True
+        for trigger in (self.trigger_configure, self.trigger_activate):
+            trigger()
+            if self.lifecycle_state == "unconfigured" or (trigger == self.trigger_activate
+                                                           and self.lifecycle_state != "active"):
+                return False
+        return True
+
+    def finalize(self) -> None:
+        """Bring the node to 'finalized' from wherever it is (deactivating first if active)."""
+        if self.lifecycle_state == "active":
+            self.trigger_deactivate()
+        if self.lifecycle_state != "finalized":
+            self.trigger_shutdown()

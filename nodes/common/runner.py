@@ -1,0 +1,110 @@
+"""The one ``main()`` shape every PPOD node uses (STYLE.md rule 10).
+
+:func:`run_node` confines DDS to loopback (unless configured otherwise), initialises a private
+rclpy context, builds the node, spins it in a thread, and waits for Ctrl-C, SIGTERM, an external
+context shutdown or a crashed executor. On the way out it brings a lifecycle node to a safe,
+finalized state (deactivate, then shutdown) while the executor still runs, so the node can still
+publish its final status, and then tears down in the order that never aborts (ROS_NOTES.md):
+``executor.shutdown(); spin_thread.join(); node.destroy_node(); context.try_shutdown()``.
+A second Ctrl-C during that clean-up exits at once.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import traceback
+from collections.abc import Callable, Sequence
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from ppod_nodes.ros_env import configure_ros_environment
+
+
+def _spin(executor: SingleThreadedExecutor, failure: list[Exception]) -> None:
+    try:
+        executor.spin()
+    except ExternalShutdownException:
+        pass
+    except Exception as exc:  # a callback raised: report it, the main thread shuts down
+        failure.append(exc)
+        traceback.print_exc()
+
+
+def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) -> int:
+    """Run one node until asked to stop; returns the process exit status.
+
+    Parameters
+    ----------
+    factory : callable
+        Called as ``factory(context=context)``; returns an rclpy Node (lifecycle or not).
+    argv : sequence of str, optional
+        Command line including ``--ros-args ...`` (default: ``sys.argv``).
+    """
+    configure_ros_environment()
+    argv = list(sys.argv if argv is None else argv)
+    context = Context()
+    rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    signals_seen = []
+
+    def on_signal(signum, _frame):
+        signals_seen.append(signum)
+        if len(signals_seen) > 1:
+            os._exit(128 + signum)  # second signal: the user insists
+        stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    node = None
+    executor = None
+    thread = None
+    failure: list[Exception] = []
+    status = 0
+    try:
+        node = factory(context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        thread = threading.Thread(target=_spin, args=(executor, failure), name="spin", daemon=True)
+        thread.start()
+        autostart = getattr(node, "autostart", None)
+        if autostart is not None and not autostart():
+            node.get_logger().error("autostart failed; see the messages above")
+            status = 1
+            stop.set()
+        while not stop.wait(0.1):
+            if not context.ok() or not thread.is_alive():
+                break
+        if failure:
+            status = 1
+    finally:
+        if node is not None and hasattr(node, "finalize") and context.ok():
+            try:
+                node.finalize()
+            except Exception:  # noqa: BLE001 - keep tearing down; the traceback is printed
+                traceback.print_exc()
+                status = status or 1
+        if executor is not None:
+            executor.shutdown()
+        if thread is not None:
+            thread.join(timeout=5.0)
+        if node is not None:
+            node.destroy_node()
+        context.try_shutdown()
+        for s, h in previous.items():
+            signal.signal(s, h)
+    return status
+
+
+def make_main(factory: Callable[..., object]) -> Callable[[Sequence[str] | None], int]:
+    """A console-script entry point for ``factory`` (see pyproject's [project.scripts])."""
+
+    def main(argv: Sequence[str] | None = None) -> int:
+        return run_node(factory, argv)
+
+    main.__doc__ = f"Run {getattr(factory, '__name__', 'the node')} (see its module docstring)."
+    return main

@@ -1,0 +1,83 @@
+"""`ppod up` starts nodes as processes, manages their lifecycles and stops them all."""
+
+import re
+import signal
+
+import pytest
+
+from tests.ros.helpers import ROOT, pid_alive, ppod, wait_gone
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+CONFIG = str(ROOT / "tests" / "support" / "two_nodes.yaml")
+
+
+def _started_pids(proc) -> dict[str, int]:
+    return {m.group(1): int(m.group(2)) for m in
+            (re.search(r"started (\w+) \(pid (\d+)\)", line) for line in proc.lines) if m}
+
+
+def test_sigint_to_the_launcher_stops_every_child_after_they_exchanged_messages():
+    proc = ppod("up", "--config", CONFIG)
+    try:
+        proc.wait_for(r"all nodes up", 60)
+        proc.wait_for(r"\[motion_listener\].*received talk-11", 30)
+        pids = _started_pids(proc)
+        assert set(pids) == {"motion_listener", "motion_talker"}
+        assert all(pid_alive(p) for p in pids.values())
+        proc.p.send_signal(signal.SIGINT)
+        assert proc.wait(30) == 0
+        assert wait_gone(list(pids.values()), 5) == []
+        out = proc.output
+        assert "[motion_talker] [INFO] deactivate: now inactive" in out
+        assert "[motion_talker] [INFO] shutdown: now finalized" in out
+        assert "all children exited" in out
+    finally:
+        proc.kill()
+
+
+def test_a_dying_node_is_reported_and_stops_the_stack():
+    proc = ppod("up", "--config", CONFIG)
+    try:
+        proc.wait_for(r"all nodes up", 60)
+        pids = _started_pids(proc)
+        import os
+
+        os.kill(pids["motion_talker"], signal.SIGKILL)
+        proc.wait_for(r"motion_talker exited unexpectedly \(killed by SIGKILL\)", 10)
+        assert proc.wait(30) == 1
+        assert wait_gone(list(pids.values()), 5) == []
+    finally:
+        proc.kill()
+
+
+def test_children_do_not_outlive_a_killed_launcher():
+    proc = ppod("up", "--config", CONFIG)
+    try:
+        proc.wait_for(r"all nodes up", 60)
+        pids = _started_pids(proc)
+        proc.p.send_signal(signal.SIGKILL)
+        proc.wait(10)
+        assert wait_gone(list(pids.values()), 15) == []
+    finally:
+        proc.kill()
+
+
+def test_a_failing_configure_is_reported_and_nothing_is_left_running(tmp_path):
+    cfg = tmp_path / "fail.yaml"
+    cfg.write_text(open(CONFIG).read().replace("params: {rate_hz: 20.0}", "params: {fail_configure: true}"))
+    proc = ppod("up", "--config", str(cfg))
+    try:
+        proc.wait_for(r"motion_talker: configure failed", 60)
+        assert proc.wait(30) == 1
+        assert "configure failed: fail_configure is set" in proc.output
+        assert wait_gone(list(_started_pids(proc).values()), 5) == []
+    finally:
+        proc.kill()
+
+
+def test_bad_launch_config_is_one_clear_error(tmp_path):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text("nodes:\n  - name: a\n    module: x\n    colour: red\n")
+    proc = ppod("up", "--config", str(cfg))
+    assert proc.wait(30) == 2
+    assert "nodes[0].colour" in proc.output

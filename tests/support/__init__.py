@@ -1,0 +1,1 @@
+"""Processes and helpers the tests start (importable when tests/ is on PYTHONPATH)."""

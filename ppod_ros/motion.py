@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ppod_ros.config.fields import Fields, check_array, load_yaml_file, parse_yaml_text
+from ppod_ros.config.fields import Fields, check_array, check_number, load_yaml_file, parse_yaml_text
 from ppod_ros.errors import ConfigError
 
 #: Axis order of every 6-vector of plate motion: linear acceleration of P's origin (m/s^2),
@@ -64,11 +64,7 @@ class PlateMotion:
     _key: bytes = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        f = self.frequency_hz
-        if isinstance(f, bool) or not isinstance(f, (int, float, np.integer, np.floating)) or not math.isfinite(f):
-            raise ConfigError(f"frequency_hz: must be a finite number in Hz, got {f!r}")
-        if f <= 0:
-            raise ConfigError(f"frequency_hz: must be > 0 Hz, got {f}")
+        f = check_number(self.frequency_hz, "frequency_hz", min_value=0.0, exclusive_min=True, unit="Hz")
         k = np.asarray(self.k)
         if k.ndim != 1:
             raise ConfigError(f"harmonics: k must be a 1-D list of harmonic numbers, got shape {k.shape}")
@@ -86,10 +82,8 @@ class PlateMotion:
             raise ConfigError(
                 f"harmonics.amplitude: amplitudes must be >= 0 (use the phase for sign), got {amp.tolist()}")
         if self.ramp_time_s is not None:
-            r = self.ramp_time_s
-            if isinstance(r, bool) or not isinstance(r, (int, float, np.integer, np.floating)) or not math.isfinite(r) or r < 0:
-                raise ConfigError(f"ramp_time_s: must be a finite number of seconds >= 0, got {r!r}")
-            object.__setattr__(self, "ramp_time_s", float(r))
+            ramp = check_number(self.ramp_time_s, "ramp_time_s", min_value=0.0, unit="s")
+            object.__setattr__(self, "ramp_time_s", ramp)
         if not isinstance(self.name, str):
             raise ConfigError(f"name: expected a string, got {self.name!r}")
         order = np.argsort(k)

@@ -10,7 +10,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 
@@ -251,7 +251,7 @@ class RigidPart:
         return out
 
 
-Part = Union[PointPart, RigidPart]
+Part = PointPart | RigidPart
 
 
 def _check_mu(value: Any, name: str) -> float:

@@ -34,35 +34,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import rclpy
     import yaml
-    from rclpy.context import Context
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from rclpy.signals import SignalHandlerOptions
 
     from ppod_nodes.common.msgdict import to_data, type_from_name
-    from ppod_nodes.ros_env import configure_ros_environment
+    from ppod_nodes.common.session import RosSession
 
     if not args.list and not args.topic:
         print("ppod echo: give a topic, or --list", file=sys.stderr)
         return 2
-    configure_ros_environment()
-    context = Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node("ppod_echo", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
+    session = RosSession("ppod_echo")
+    node = session.node
     done = threading.Event()
-
-    def spin():
-        try:
-            executor.spin()
-        except ExternalShutdownException:
-            pass
-
-    thread = threading.Thread(target=spin, daemon=True)
-    thread.start()
     try:
         topic = None if args.topic is None else "/" + args.topic.lstrip("/")
         deadline = time.monotonic() + args.discovery_wait
@@ -119,7 +102,4 @@ def run(args: argparse.Namespace) -> int:
             return 1
         return 0
     finally:
-        executor.shutdown()
-        thread.join(timeout=5)
-        node.destroy_node()
-        context.try_shutdown()
+        session.close()

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 from builtin_interfaces.msg import Time
-
 from ppod_msgs.msg import PlateHarmonic
 from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 

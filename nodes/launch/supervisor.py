@@ -95,8 +95,8 @@ class Supervisor:
         prefix = f"[{child.spec.name}]"
         if self.color:
             prefix = f"\033[{_COLORS[index % len(_COLORS)]}m{prefix}\033[0m"
-        logf = open(self.log_dir / f"{child.spec.name}.log", "a") if self.log_dir else None
-        try:
+        log_path = self.log_dir / f"{child.spec.name}.log" if self.log_dir else os.devnull
+        with open(log_path, "a") as logf:
             assert child.process.stdout is not None
             for line in child.process.stdout:
                 line = line.rstrip("\n")
@@ -104,12 +104,8 @@ class Supervisor:
                 del child.lines[:-self._keep]
                 with self._lock:
                     print(f"{prefix} {line}", file=self.out, flush=True)
-                if logf:
-                    logf.write(line + "\n")
-                    logf.flush()
-        finally:
-            if logf:
-                logf.close()
+                logf.write(line + "\n")
+                logf.flush()
 
     # ------------------------------------------------------------------ start
     def start(self, spec: NodeSpec) -> Child:

@@ -25,7 +25,8 @@ def test_motion_yaml_round_trips_through_to_dict():
 
 
 def test_acceleration_velocity_and_displacement_are_consistent_integrals():
-    m = PlateMotion(7.0, [1, 3], [[1, 2, 3, 4, 5, 6], [0.5, 0, 1, 0, 2, 0]], np.random.default_rng(1).uniform(-3, 3, (2, 6)))
+    phases = np.random.default_rng(1).uniform(-3, 3, (2, 6))
+    m = PlateMotion(7.0, [1, 3], [[1, 2, 3, 4, 5, 6], [0.5, 0, 1, 0, 2, 0]], phases)
     t = np.linspace(0, m.period_s, 4001)
     a, v, d = m.acceleration(t), m.velocity(t), m.displacement(t)
     dt = t[1] - t[0]

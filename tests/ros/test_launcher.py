@@ -2,6 +2,7 @@
 
 import re
 import signal
+from pathlib import Path
 
 import pytest
 
@@ -64,7 +65,7 @@ def test_children_do_not_outlive_a_killed_launcher():
 
 def test_a_failing_configure_is_reported_and_nothing_is_left_running(tmp_path):
     cfg = tmp_path / "fail.yaml"
-    cfg.write_text(open(CONFIG).read().replace("params: {rate_hz: 20.0}", "params: {fail_configure: true}"))
+    cfg.write_text(Path(CONFIG).read_text().replace("params: {rate_hz: 20.0}", "params: {fail_configure: true}"))
     proc = ppod("up", "--config", str(cfg))
     try:
         proc.wait_for(r"motion_talker: configure failed", 60)

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from rclpy.node import Node
-
 from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+from rclpy.node import Node
 
 from ppod_nodes.common import qos
 from ppod_nodes.common.runner import make_main

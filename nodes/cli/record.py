@@ -1,0 +1,71 @@
+"""Record the stack's topics to an MCAP file (ROS 2 serialization; rosbag2 and Foxglove read it).
+
+By default every /ppod topic (goals, status, accelerations, poses, simulation ground truth and the
+scenario the simulated device publishes: its configuration, seed and initial part states) plus
+/diagnostics, except camera images (large: add --images). Stop with Ctrl-C or --duration.
+
+examples:
+  ppod record out/session.mcap --duration 30
+  ppod record out/session.mcap --images
+  ppod record out/session.mcap --topics /ppod/part_poses /ppod/plate_motion_goal
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+import time
+from pathlib import Path
+
+HELP = "record ppod topics to MCAP (ROS 2 serialization)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("output", type=Path, help="the .mcap file to write")
+    parser.add_argument("--topics", nargs="+", metavar="TOPIC", help="record exactly these topics")
+    parser.add_argument("--images", action="store_true", help="also record camera images")
+    parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+
+
+def default_include(images: bool):
+    def include(topic: str, type_name: str) -> bool:
+        if type_name == "sensor_msgs/msg/Image" and not images:
+            return False
+        return topic.startswith("/ppod/") or topic == "/diagnostics"
+
+    return include
+
+
+def run(args: argparse.Namespace) -> int:
+    from ppod_nodes.common.session import RosSession
+    from ppod_nodes.record.mcap_io import McapRecorder
+
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    wanted = None if not args.topics else {"/" + t.lstrip("/") for t in args.topics}
+    include = (lambda topic, _type: topic in wanted) if wanted else default_include(args.images)
+    stop = threading.Event()
+    previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    started = time.monotonic()
+    with RosSession("ppod_record") as session:
+        meta = {"ppod": {"recorded_by": "ppod record", "started_unix_s": f"{time.time():.3f}"}}
+        recorder = McapRecorder(session.node, args.output, include, metadata=meta)
+        session.node.get_logger().info(f"recording to {args.output} (Ctrl-C to stop)")
+        try:
+            last_report = started
+            while not stop.wait(0.2):
+                now = time.monotonic()
+                if args.duration is not None and now - started >= args.duration:
+                    break
+                if now - last_report >= 5.0:
+                    last_report = now
+                    print(f"recording: {sum(recorder.counts.values())} messages on {len(recorder.counts)} topics",
+                          flush=True)
+        finally:
+            recorder.close()
+            for s, h in previous.items():
+                signal.signal(s, h)
+    print(f"wrote {args.output}: {sum(recorder.counts.values())} messages in {time.monotonic() - started:.1f} s")
+    for topic, n in sorted(recorder.counts.items()):
+        print(f"  {topic}: {n}")
+    return 0

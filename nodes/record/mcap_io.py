@@ -1,0 +1,144 @@
+"""Record ROS topics to MCAP with ROS 2 (CDR) serialization, and read them back.
+
+The files are what rosbag2's MCAP storage writes: one ``ros2msg`` schema per type (the full
+definition with nested types), one ``cdr`` channel per topic, message log times in nanoseconds,
+plus metadata records. rosbag2 (``ros2 bag info``), Foxglove and ``mcap-ros2-support`` read them.
+Messages are taken raw (serialized) from the subscription, so recording costs no (de)serialization.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+
+from ppod_nodes.common.msgdict import type_from_name
+from ppod_nodes.record.msgdef import full_definition
+from ppod_ros.errors import ConfigError
+
+PROFILE = "ros2"
+
+
+@dataclass
+class RecordedMessage:
+    topic: str
+    type_name: str
+    log_time_ns: int
+    data: bytes
+
+    def decode(self) -> Any:
+        return deserialize_message(self.data, type_from_name(self.type_name))
+
+
+class McapRecorder:
+    """Subscribe (raw) to topics of a running system and write them to an MCAP file.
+
+    Parameters
+    ----------
+    node : rclpy Node
+        The node that subscribes (its executor must spin elsewhere).
+    path : Path
+        Output file (overwritten).
+    include : callable(topic, type_name) -> bool
+        Which discovered topics to record.
+    metadata : dict of str -> dict of str
+        MCAP metadata records written at the start (e.g. the configuration of the session).
+    """
+
+    def __init__(self, node, path: Path, include, metadata: dict[str, dict[str, str]] | None = None,
+                 discovery_period_s: float = 0.5):
+        self.node = node
+        self.path = Path(path)
+        self.include = include
+        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        self._writer = Writer(self._file, compression=CompressionType.ZSTD)
+        self._writer.start(profile=PROFILE, library="ppod record")
+        for name, data in (metadata or {}).items():
+            self._writer.add_metadata(name, {k: str(v) for k, v in data.items()})
+        self._lock = threading.Lock()
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._subs: dict[str, Any] = {}
+        self.counts: dict[str, int] = {}
+        self._closed = False
+        self._timer = node.create_timer(discovery_period_s, self.discover)
+
+    def discover(self) -> None:
+        """Subscribe to newly appeared topics that ``include`` accepts."""
+        for topic, types in self.node.get_topic_names_and_types():
+            if topic in self._subs or not types or not self.include(topic, types[0]):
+                continue
+            type_name = types[0]
+            try:
+                msg_type = type_from_name(type_name)
+                definition = full_definition(type_name)
+            except (ImportError, ValueError, FileNotFoundError) as exc:
+                self.node.get_logger().warning(f"not recording {topic}: {exc}")
+                self._subs[topic] = None
+                continue
+            infos = self.node.get_publishers_info_by_topic(topic)
+            qos = QoSProfile(
+                depth=100,
+                durability=(DurabilityPolicy.TRANSIENT_LOCAL
+                            if any(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+                            else DurabilityPolicy.VOLATILE),
+                reliability=(ReliabilityPolicy.BEST_EFFORT
+                             if any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos)
+                             else ReliabilityPolicy.RELIABLE),
+            )
+            with self._lock:
+                if type_name not in self._schemas:
+                    self._schemas[type_name] = self._writer.register_schema(type_name, "ros2msg", definition.encode())
+                self._channels[topic] = self._writer.register_channel(topic, "cdr", self._schemas[type_name])
+            self.counts[topic] = 0
+            self._subs[topic] = self.node.create_subscription(
+                msg_type, topic, lambda data, t=topic: self._write(t, data), qos, raw=True)
+
+    def _write(self, topic: str, data: bytes) -> None:
+        now = time.time_ns()
+        with self._lock:
+            if self._closed:
+                return
+            self._writer.add_message(self._channels[topic], log_time=now, data=data, publish_time=now,
+                                     sequence=self.counts[topic])
+            self.counts[topic] += 1
+
+    def close(self) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self.node.destroy_timer(self._timer)
+            for sub in self._subs.values():
+                if sub is not None:
+                    self.node.destroy_subscription(sub)
+            self._writer.finish()
+            self._file.close()
+
+
+def read_mcap(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[RecordedMessage]:
+    """Messages of an MCAP recording in log-time order (optionally only ``topics``)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"recording {path}: no such file")
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages(topics=list(topics) if topics else None,
+                                                             log_time_order=True):
+            if channel.message_encoding != "cdr" or schema is None:
+                continue
+            yield RecordedMessage(channel.topic, schema.name, message.log_time, message.data)
+
+
+def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        return {m.name: dict(m.metadata) for m in reader.iter_metadata()}

@@ -99,5 +99,12 @@ export MPLBACKEND=${MPLBACKEND:-Agg}
 case "$JOB" in
   setup) say "ready: $VENV (activate with: source $VENV/bin/activate)" ;;
   demo)  exec "$VENV/bin/ppod" demo "$@" ;;
-  test)  cd "$ROOT" && exec "$VENV/bin/python" -m pytest "$@" ;;
+  test)
+    # Optional: tcpdump lets tests/ros/test_dds_loopback.py prove DDS stays on loopback.
+    if ! command -v tcpdump >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+      say "installing tcpdump for the DDS loopback test (optional)"
+      { apt-get install -y -qq tcpdump || { apt-get update -qq && apt-get install -y -qq tcpdump; }; } \
+        >/dev/null 2>&1 || say "tcpdump not installed; that test will be skipped"
+    fi
+    cd "$ROOT" && exec "$VENV/bin/python" -m pytest "$@" ;;
 esac

@@ -40,6 +40,9 @@ def test_no_dds_packet_leaves_loopback_while_nodes_talk(tmp_path):
     time.sleep(1.0)
     if any(p.poll() is not None for p, _ in caps.values()):
         errors = " ".join(p.stderr.read().decode() for p, _ in caps.values() if p.poll() is not None)
+        for p, _ in caps.values():
+            p.kill()
+            p.wait(timeout=10)
         pytest.skip(f"tcpdump cannot capture here: {errors.strip()[:200]}")
     proc = ppod("up", "--config", str(ROOT / "tests" / "support" / "two_nodes.yaml"), "--duration", "4")
     try:

@@ -199,36 +199,43 @@ def fit_harmonics(
     suspect: list[str | None] = [None] * C
     used = valid.sum(axis=0)
     for c in range(C):
-        ok = valid[:, c]
-        yc, tc = y[ok, c], t[ok, c]
+        yc = y[valid[:, c], c]
         if used[c] < max(health.min_valid_fraction * N, 2 * K + 2):
             fatal[c] = f"missing: {used[c]} of {N} samples valid"
-            continue
-        if np.isfinite(fs[c]) and np.mean(np.abs(yc) >= 0.999 * fs[c]) >= health.saturation_fraction:
+        elif np.isfinite(fs[c]) and np.mean(np.abs(yc) >= 0.999 * fs[c]) >= health.saturation_fraction:
             share = np.mean(np.abs(yc) >= 0.999 * fs[c])
             fatal[c] = f"saturated: {share:.1%} of samples at full scale {fs[c]:g} m/s^2"
-            continue
-        A = _design(tc, omega, K)
+    # Channels sampled at the same times with the same gaps share one design matrix: fit them together.
+    groups: dict[bytes, list[int]] = {}
+    for c in range(C):
+        if fatal[c] is None:
+            groups.setdefault(valid[:, c].tobytes() + t[:, c].tobytes(), []).append(c)
+    for cols in groups.values():
+        ok = valid[:, cols[0]]
+        A = _design(t[ok, cols[0]], omega, K)
         cond = np.linalg.cond(A / np.linalg.norm(A, axis=0))
         if not cond <= health.max_fit_condition:
-            fatal[c] = (
-                f"coverage: samples span {span * frequency_hz:.2f} cycles, too little to separate "
-                f"harmonics 1..{K} (condition {cond:.3g})"
-            )
+            for c in cols:
+                fatal[c] = (
+                    f"coverage: samples span {span * frequency_hz:.2f} cycles, too little to separate "
+                    f"harmonics 1..{K} (condition {cond:.3g})"
+                )
             continue
-        coef, *_ = np.linalg.lstsq(A, yc, rcond=None)
-        res = yc - A @ coef
-        dof = max(yc.size - A.shape[1], 1)
-        sigma2 = float(res @ res) / dof
-        cov_diag = sigma2 * np.diag(np.linalg.inv(A.T @ A))
-        dc[c] = coef[0]
-        phasors[:, c] = coef[1::2] + 1j * coef[2::2]
-        variance[:, c] = cov_diag[1::2] + cov_diag[2::2]
-        rms[c] = math.sqrt(float(res @ res) / yc.size)
-        if np.ptp(yc) <= health.flat_mps2:
-            suspect[c] = f"flat: peak-to-peak {np.ptp(yc):.3g} m/s^2"
-        elif _stuck_fraction(yc) >= health.stuck_fraction:
-            suspect[c] = f"stuck: {_stuck_fraction(yc):.0%} of consecutive samples repeat"
+        Y = y[ok][:, cols]
+        coef, *_ = np.linalg.lstsq(A, Y, rcond=None)
+        res = Y - A @ coef
+        ss = np.sum(res**2, axis=0)
+        inv_diag = np.diag(np.linalg.inv(A.T @ A))
+        sigma2 = ss / max(Y.shape[0] - A.shape[1], 1)
+        dc[cols] = coef[0]
+        phasors[:, cols] = coef[1::2] + 1j * coef[2::2]
+        variance[:, cols] = np.outer(inv_diag[1::2] + inv_diag[2::2], sigma2)
+        rms[cols] = np.sqrt(ss / Y.shape[0])
+        for i, c in enumerate(cols):
+            if np.ptp(Y[:, i]) <= health.flat_mps2:
+                suspect[c] = f"flat: peak-to-peak {np.ptp(Y[:, i]):.3g} m/s^2"
+            elif _stuck_fraction(Y[:, i]) >= health.stuck_fraction:
+                suspect[c] = f"stuck: {_stuck_fraction(Y[:, i]):.0%} of consecutive samples repeat"
     alive = np.isfinite(rms)
     if alive.any():
         typical = float(np.median(rms[alive]))

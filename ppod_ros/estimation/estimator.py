@@ -278,6 +278,17 @@ class AccelEstimator:
                 suspect[c] = "flat: all harmonics zero"
             elif rows.shape[0] >= 3 and np.all(rows == rows[0]):
                 suspect[c] = f"stuck: {rows.shape[0]} identical cycle summaries"
+        if variance is None and n_cyc >= 3:
+            # A channel whose summaries wander far more from cycle to cycle than the others' is
+            # failing (intermittent, dying): suspect, like a raw channel that is not periodic.
+            spread = np.sqrt(var.sum(axis=0))
+            alive = [c for c in range(C) if fatal[c] is None]
+            typical = float(np.median(spread[alive])) if alive else 0.0
+            limit = max(self.health.fit_residual_ratio * typical, self.health.flat_mps2)
+            for c in alive:
+                if suspect[c] is None and spread[c] > limit:
+                    ratio = spread[c] / max(typical, 1e-300)
+                    suspect[c] = f"not steady: cycle-to-cycle scatter {ratio:.0f}x the median channel's"
         return self._solve(idx, ks, Y, var, float(frequency_hz), fatal, suspect, float(np.max(n_good)))
 
     def from_recording(self, recording: AccelRecording, segment: int | None = None) -> PlateEstimate:
@@ -371,13 +382,20 @@ class AccelEstimator:
                 use[worst] = False
                 status[worst] = f"inconsistent residual ({z_out:.1f} sigma)"
                 continue
-            if z_in.max() > thr:
-                c = int(np.argmax(z_in))
-                status[c] = f"inconsistent residual ({z_in[c]:.1f} sigma)"
-                use[c] = False
-                self._require(
-                    idx, use, names, status, "after a channel the layout cannot spare became inconsistent"
-                )
+            # Leave-one-out found nobody to blame; an inconsistency left is in a channel the layout
+            # cannot spare (it could not be left out), so the estimate cannot be trusted.
+            for c in np.flatnonzero(z_in > thr):
+                rest = use.copy()
+                rest[c] = False
+                if not self._determined(idx, rest):
+                    status[c] = f"inconsistent residual ({z_in[c]:.1f} sigma)"
+                    self._require(
+                        idx,
+                        rest,
+                        names,
+                        status,
+                        "after a channel the layout cannot spare became inconsistent",
+                    )
             break
         std = np.sqrt(np.einsum("kjc,kc->kj", np.abs(P) ** 2, np.where(use, np.nan_to_num(var), 0.0)))
         Ru = R[:, use]
@@ -460,11 +478,16 @@ class AccelEstimator:
         return U, S, iters, change, Pfull
 
     def _scale2(self, Y: np.ndarray, var: np.ndarray, use: np.ndarray) -> np.ndarray:
-        """Expected residual power per harmonic and channel: noise plus the model floor."""
+        """Expected residual power per harmonic and channel: noise plus the model floor.
+
+        The noise is the median over the used channels, not each channel's own: a failing channel's
+        own scatter is large and would excuse its residual.
+        """
         h = self.health
         signal = np.sqrt(np.mean(np.abs(Y[:, use]) ** 2, axis=1))  # (K,) RMS channel signal per harmonic
         floor2 = (h.model_floor * signal) ** 2 + h.flat_mps2**2
-        return np.nan_to_num(var, nan=0.0) + floor2[:, None]
+        noise = np.median(np.nan_to_num(var[:, use], nan=0.0), axis=1)
+        return np.broadcast_to((noise + floor2)[:, None], Y.shape)
 
     def _determined(self, idx: np.ndarray, use: np.ndarray) -> bool:
         return use.sum() >= 6 and self.layout.observability(self._full_mask(idx, use)).ok(

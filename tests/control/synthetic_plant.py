@@ -5,8 +5,8 @@ plate; the plate (mass, inertia) sits on a suspension with resonances around 8-1
 working frequencies the response is near the mass line with some phase. Its frequency response is
 a callable ``response(freq_hz (K,)) -> (K, 6, 6)``, like the nominal model the project will provide.
 
-The "true" plate has a gain and phase error, cross-coupling between actuators, and a cubic coil
-nonlinearity (Hammerstein: each coil's force follows i + beta i^3) that adds a third harmonic.
+The "true" plate has a gain and phase error, cross-coupling between actuators, and a third harmonic:
+added (a fixed fraction of the fundamental) or made by a cubic coil nonlinearity.
 """
 
 from __future__ import annotations
@@ -53,10 +53,12 @@ def nominal_response(freq_hz) -> np.ndarray:
 
 
 def mismatched_response(gain=1.15, phase_deg=10.0, coupling=0.05, seed=0):
-    """A true G(f) = gain e^{i phase} G_nom(f) (I + coupling X), X off-diagonal with unit entries."""
+    """A true G(f) = gain e^{i phase} G_nom(f) (I + coupling X): X off-diagonal, random phases,
+    scaled to spectral norm 1, so ``coupling`` is the size of the cross-coupling error."""
     rng = np.random.default_rng(seed)
     X = np.exp(1j * rng.uniform(0, 2 * np.pi, (6, 6)))
     np.fill_diagonal(X, 0)
+    X /= np.linalg.norm(X, 2)
     mix = np.eye(6) + coupling * X
     factor = gain * np.exp(1j * np.radians(phase_deg))
 
@@ -66,18 +68,39 @@ def mismatched_response(gain=1.15, phase_deg=10.0, coupling=0.05, seed=0):
     return response
 
 
+SCALE = np.array([1, 1, 1, 0.1, 0.1, 0.1])  # the error measure's scaling (L = 0.1 m)
+
+
 class SyntheticPlate:
     """The true plate: coil currents (harmonics 1..Kc) -> plate acceleration phasors (harmonics 1..Kout).
 
-    ``beta`` (1/A^2) is each coil's cubic coefficient; :meth:`calibrate_third_harmonic` sets it so
-    that a given drive makes a given third harmonic relative to the fundamental.
+    Two ways to add a third harmonic:
+
+    - ``third`` (additive): the plate adds ``third`` times its fundamental, turned by a fixed random
+      unitary map (in the error measure's scaled units), to its third harmonic, whatever the drive:
+      exactly "an added third harmonic" of that fraction;
+    - ``beta`` (cubic coils, 1/A^2): each coil's force follows i + beta i^3 (a Hammerstein model):
+      it also mixes harmonics, e.g. cancelling the third harmonic makes a small fifth.
     """
 
-    def __init__(self, response, frequency_hz: float, beta: float = 0.0, harmonics_out: int = 6):
+    def __init__(
+        self,
+        response,
+        frequency_hz: float,
+        beta: float = 0.0,
+        harmonics_out: int = 6,
+        third: float = 0.0,
+        seed: int = 1,
+    ):
         self.response = response
         self.frequency_hz = frequency_hz
         self.beta = beta
         self.kout = harmonics_out
+        q, _ = np.linalg.qr(
+            np.random.default_rng(seed).normal(size=(6, 6))
+            + 1j * np.random.default_rng(seed + 1).normal(size=(6, 6))
+        )
+        self.third_map = third * (q / SCALE[:, None]) * SCALE[None, :]
 
     def forces(self, currents_a: np.ndarray) -> np.ndarray:
         """Harmonics 1..Kout (Kout, 6) of i + beta i^3 per coil, by FFT over one period."""
@@ -94,13 +117,14 @@ class SyntheticPlate:
         """Plate acceleration phasors (Kout, 6) on harmonics 1..Kout."""
         F = self.forces(currents_a)
         G = self.response(np.arange(1, self.kout + 1) * self.frequency_hz)
-        return np.einsum("kij,kj->ki", G, F)
+        A = np.einsum("kij,kj->ki", G, F)
+        A[2] += self.third_map @ A[0]
+        return A
 
     def calibrate_third_harmonic(self, currents_a: np.ndarray, fraction: float) -> None:
         """Choose beta so the accel's 3rd harmonic is ``fraction`` of the fundamental (norms, L = 0.1)."""
-        scale = np.array([1, 1, 1, 0.1, 0.1, 0.1])
         self.beta = 1e-3
         for _ in range(3):  # the ratio is nearly linear in beta for small beta
             a = self.accel(currents_a)
-            ratio = np.linalg.norm(a[2] * scale) / np.linalg.norm(a[0] * scale)
+            ratio = np.linalg.norm(a[2] * SCALE) / np.linalg.norm(a[0] * SCALE)
             self.beta *= fraction / ratio

@@ -76,8 +76,10 @@ class DeviceLimits:
 
     def __post_init__(self) -> None:
         for name in ("max_current_a", "max_step_a"):
-            v = np.broadcast_to(np.asarray(getattr(self, name), float), (6,)).copy()
-            v = check_array(v, f"limits.{name}", shape=(6,), unit="A")
+            v = check_array(getattr(self, name), f"limits.{name}", unit="A")
+            if v.shape not in ((), (6,)):
+                raise ConfigError(f"limits.{name}: expected 1 value or 6 (per actuator), got shape {v.shape}")
+            v = np.broadcast_to(v, (6,)).copy()
             if np.any(v <= 0):
                 raise ConfigError(f"limits.{name}: must be > 0 A, got {v.tolist()}")
             v.setflags(write=False)

@@ -38,6 +38,7 @@ class Rig:
         self.estimator = AccelEstimator(LAYOUT, harmonics=plate.kout)
         self.commands: list[np.ndarray] = []
         self.truth: list[np.ndarray] = []
+        self.records: list[tuple[np.ndarray, np.ndarray]] = []  # (time_s, readings) per measurement
 
     def accel_of(self, currents_a: np.ndarray, t: np.ndarray | None = None):
         """Estimate of the plate's acceleration under coil currents (K, 6) on harmonics 1..K."""
@@ -49,6 +50,7 @@ class Rig:
         K = self.plate.kout
         r = readings(A, np.arange(1, K + 1), self.plate.frequency_hz, t, LAYOUT.position_m, LAYOUT.axis)
         r = r + self.rng.normal(0.0, self.noise, r.shape)
+        self.records.append((t, r))
         return self.estimator.from_samples(t, r, self.plate.frequency_hz)
 
     def measure(self, correction_a: np.ndarray):

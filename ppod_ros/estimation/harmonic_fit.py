@@ -186,6 +186,16 @@ def fit_harmonics(
     if fs.shape != (C,):
         raise ConfigError(f"full_scale_mps2: expected shape ({C},), got {fs.shape}")
     omega = 2.0 * math.pi * frequency_hz
+    if N > 1:
+        # Uniformly sampled channels alias harmonics above Nyquist onto lower ones: say so plainly
+        # rather than through an ill-conditioned fit.
+        dt = np.diff(np.sort(t[:, 0][np.isfinite(t[:, 0])]))
+        rate_hz = 1.0 / float(np.median(dt)) if dt.size and np.median(dt) > 0 else math.inf
+        if K * frequency_hz >= rate_hz / 2:
+            raise ConfigError(
+                f"harmonics: harmonic {K} at {K * frequency_hz:g} Hz is above the Nyquist frequency "
+                f"{rate_hz / 2:g} Hz of samples at {rate_hz:g} Hz; fit fewer harmonics"
+            )
     valid = np.isfinite(y) & np.isfinite(t)
     span = (
         np.nanmax(np.where(valid, t, np.nan)) - np.nanmin(np.where(valid, t, np.nan)) if valid.any() else 0.0

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from plate_sim import readings, sample_times
 
-from ppod_ros.errors import DeviceError
+from ppod_ros.errors import ConfigError, DeviceError
 from ppod_ros.estimation import AccelerometerLayout, AccelEstimator, EstimationError
 from ppod_ros.motion import PlateMotion, acceleration_error
 
@@ -172,3 +172,12 @@ def test_columns_can_be_a_named_subset_of_the_layout_in_any_order():
     )
     assert est.channels == tuple(LAYOUT.names[i] for i in order)
     assert _error(est) < 2e-5
+
+
+def test_harmonics_above_the_nyquist_frequency_are_refused():
+    t = sample_times(30, 10, 300)  # 10 samples per cycle: harmonics up to 4 only
+    r = readings(GOAL.phasor_table(1), [1], 30, t, LAYOUT.position_m, LAYOUT.axis)
+    with pytest.raises(ConfigError, match="above the Nyquist frequency 150 Hz"):
+        AccelEstimator(LAYOUT, harmonics=6).from_samples(t, r, 30)
+    est = AccelEstimator(LAYOUT, harmonics=4).from_samples(t, r, 30)
+    assert abs(est.phasors[0, 0] - GOAL.phasors()[0, 0]) < 1e-3

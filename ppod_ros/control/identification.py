@@ -20,7 +20,7 @@ import numpy as np
 from ppod_ros.control.limits import DeviceLimits, check_within
 from ppod_ros.control.plant import PlantModel
 from ppod_ros.errors import ConfigError
-from ppod_ros.estimation.estimator import PlateEstimate
+from ppod_ros.estimation import PlateEstimate
 
 
 @dataclass(frozen=True)

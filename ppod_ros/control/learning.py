@@ -26,7 +26,7 @@ import numpy as np
 from ppod_ros.control.limits import DeviceLimits, LimitFunction, LimitReport, check_within, peak_a
 from ppod_ros.control.plant import PlantModel, PlantSource, as_plant
 from ppod_ros.errors import ConfigError
-from ppod_ros.estimation.estimator import PlateEstimate
+from ppod_ros.estimation import PlateEstimate
 from ppod_ros.motion import DEFAULT_LENGTH_SCALE_M, PlateMotion, acceleration_error
 
 RUNNING, CONVERGED, STALLED, DIVERGED = "running", "converged", "stalled", "diverged"

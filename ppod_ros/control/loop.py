@@ -19,8 +19,7 @@ import numpy as np
 from ppod_ros.control.learning import CONVERGED, STALLED, ControlStep, LearningController
 from ppod_ros.control.plant import PlantModel
 from ppod_ros.errors import ConfigError
-from ppod_ros.estimation.estimator import AccelEstimator, PlateEstimate
-from ppod_ros.estimation.recording import AccelRecording
+from ppod_ros.estimation import AccelEstimator, AccelRecording, PlateEstimate
 
 log = logging.getLogger(__name__)
 

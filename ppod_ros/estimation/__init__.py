@@ -13,11 +13,12 @@ Public API (docs/feedback.md):
   :func:`register_reader`: recorded data (.npz, .csv; MCAP readers plug in).
 """
 
-from ppod_ros.estimation.estimator import AccelEstimator, EstimationError, PlateEstimate
+from ppod_ros.estimation.estimator import AccelEstimator
 from ppod_ros.estimation.harmonic_fit import HealthSettings, cycle_times, fit_harmonics
 from ppod_ros.estimation.layout import AccelerometerLayout, Observability
 from ppod_ros.estimation.recording import AccelRecording, read_recording, register_reader, write_recording
 from ppod_ros.estimation.second_order import SECOND_ORDER_TERMS, second_order_phasors
+from ppod_ros.estimation.six_dof import EstimationError, PlateEstimate
 
 __all__ = [
     "SECOND_ORDER_TERMS",

@@ -93,7 +93,7 @@ class ControlStep:
         Controlled harmonics 1..Kc.
     correction_a : complex ndarray, shape (Kc, 6)
         The correction to send (absolute: replaces the generator's correction table), coil-current
-        phasors (A) per harmonic and actuator. Zero after divergence.
+        phasors (A) per harmonic and actuator. After divergence, the last one applied (frozen).
     measured, goal : complex ndarray, shape (Km, 6)
         Measured and goal phasors over harmonics 1..Km (Km >= Kc: all harmonics measured).
     error_norm, error_relative : float
@@ -105,7 +105,8 @@ class ControlStep:
         "running", "converged", "stalled" (progress too slow: re-identify) or "diverged".
     converged : bool
     ramp_down : bool
-        True once diverged: the plate must be ramped down; the controller no longer updates.
+        True once diverged: the plate must be ramped down; the controller no longer updates
+        (until :meth:`LearningController.reset`).
     limits : LimitReport
         Cuts made by the device limits in this update.
     message : str
@@ -215,6 +216,18 @@ class LearningController:
         if self.state == STALLED:
             self.state = RUNNING
 
+    def reset(self, correction_a: np.ndarray | None = None) -> None:
+        """Start learning afresh (after a divergence was dealt with): state, history and correction."""
+        self.correction_a = (
+            np.zeros((self.k.size, 6), complex)
+            if correction_a is None
+            else self._table(correction_a, "correction_a")
+        )
+        self.iteration = 0
+        self.state = RUNNING
+        self.errors = []
+        self._since_plant = 0
+
     def sync_correction(self, correction_a: np.ndarray) -> None:
         """Set the correction actually applied (e.g. from a recording) before the next update."""
         self.correction_a = self._table(correction_a, "correction_a")
@@ -238,8 +251,9 @@ class LearningController:
         s = self.settings
         why = self._diverging(rel)
         if why:
+            # Stop learning: the correction stays what was last applied (no further change, so no
+            # step beyond the limits); the node has the generator ramp the whole output down.
             self.state = DIVERGED
-            self.correction_a = np.zeros_like(self.correction_a)
             return self._step(M, G, err, rel, ogr, LimitReport(), why)
         e = G[: self.k.size] - M[: self.k.size]
         proposed = self.correction_a + s.gain * self.plant.solve(e, self.k)

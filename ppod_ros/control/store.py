@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import re
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -117,7 +118,12 @@ class PlantStore:
         return sorted(out, key=lambda e: e["excitation_hz"])
 
     def get_or_identify(
-        self, device_id: str, frequency_hz: float, k: list[int] | np.ndarray, identify, refresh: bool = False
+        self,
+        device_id: str,
+        frequency_hz: float,
+        k: list[int] | np.ndarray,
+        identify: Callable[[], PlantModel],
+        refresh: bool = False,
     ) -> PlantModel:
         """The stored plant, or ``identify()`` (a PlantModel) stored and returned; ``refresh`` forces it."""
         plant = None if refresh else self.load(device_id, frequency_hz, k)

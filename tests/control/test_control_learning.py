@@ -136,7 +136,8 @@ def test_forced_divergence_stops_ramps_down_and_never_commands_beyond_the_limits
     assert final.state == DIVERGED and final.ramp_down
     assert "grew 3 iterations in a row" in final.message
     assert final.iteration <= 6
-    np.testing.assert_array_equal(final.correction_a, 0)
+    frozen = final.correction_a
+    np.testing.assert_array_equal(frozen, result.steps[-2].correction_a)  # no change on divergence
     for command in rig.commands:
         assert np.all(peak_a(command) <= LIMITS.max_current_a + 1e-9)
     for a, b in zip(rig.commands, rig.commands[1:]):
@@ -144,7 +145,9 @@ def test_forced_divergence_stops_ramps_down_and_never_commands_beyond_the_limits
     # After divergence the controller does nothing more.
     again = ctrl.update(rig.measure(ctrl.correction_a))
     assert again.ramp_down and again.iteration == final.iteration
-    np.testing.assert_array_equal(again.correction_a, 0)
+    np.testing.assert_array_equal(again.correction_a, frozen)
+    ctrl.reset()
+    assert ctrl.state == "running" and ctrl.iteration == 0 and not np.any(ctrl.correction_a)
 
 
 def test_a_huge_error_aborts_at_once():

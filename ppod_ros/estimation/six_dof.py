@@ -268,13 +268,18 @@ class SixDofSolver:
         scale = np.array(
             [1, 1, 1, self.layout.length_scale_m, self.layout.length_scale_m, self.layout.length_scale_m]
         )
-        S = np.zeros_like(Y)
+
+        def second_order(U: np.ndarray) -> np.ndarray:
+            # The terms need the motion on a dense harmonic axis; harmonics not estimated count as 0.
+            if not self.terms:
+                return np.zeros_like(Y)
+            dense = np.zeros((kmax, 6), dtype=complex)
+            dense[ks - 1] = U
+            return second_order_phasors(dense, freq_hz, pos, ax, self.terms, self.gravity_mps2)[ks - 1]
+
         for it in range(1, self.max_iterations + 1):
             iters = it
-            if self.terms:
-                dense = np.zeros((kmax, 6), dtype=complex)
-                dense[ks - 1] = U
-                S = second_order_phasors(dense, freq_hz, pos, ax, self.terms, self.gravity_mps2)[ks - 1]
+            S = second_order(U)
             Yc = (Y - S)[:, use]
             U_new = np.einsum("kjc,kc->kj", P, Yc)
             norm = np.linalg.norm(U_new * scale)
@@ -282,10 +287,7 @@ class SixDofSolver:
             U = U_new
             if not self.terms or change < self.tolerance:
                 break
-        if self.terms:  # S at the final estimate, so residuals and reports match U
-            dense = np.zeros((kmax, 6), dtype=complex)
-            dense[ks - 1] = U
-            S = second_order_phasors(dense, freq_hz, pos, ax, self.terms, self.gravity_mps2)[ks - 1]
+        S = second_order(U)  # at the final estimate, so residuals and reports match U
         Pfull = np.zeros((ks.size, 6, use.size))
         Pfull[:, :, use] = P
         return U, S, iters, change, Pfull

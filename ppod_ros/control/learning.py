@@ -18,8 +18,9 @@ within tolerance) and stalls (too little progress: a hint to re-identify the pla
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from ppod_ros.control.limits import DeviceLimits, LimitFunction, LimitReport, ch
 from ppod_ros.control.plant import PlantModel, PlantSource, as_plant
 from ppod_ros.errors import ConfigError
 from ppod_ros.estimation import PlateEstimate
+from ppod_ros.estimation.harmonic_fit import settings_from_dict
 from ppod_ros.motion import DEFAULT_LENGTH_SCALE_M, PlateMotion, acceleration_error
 
 RUNNING, CONVERGED, STALLED, DIVERGED = "running", "converged", "stalled", "diverged"
@@ -66,6 +68,11 @@ class LearningSettings:
     stall_iterations: int = 3
     stall_improvement: float = 0.5
     length_scale_m: float = DEFAULT_LENGTH_SCALE_M
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], where: str = "learning") -> LearningSettings:
+        """Strict reader of a parameter mapping; missing keys keep their defaults."""
+        return settings_from_dict(cls, data, where)
 
     def __post_init__(self) -> None:
         if not 0 < self.gain < 2:

@@ -15,12 +15,18 @@ when the other channels predict a reading it does not show).
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 
+from ppod_ros.config.fields import Fields
 from ppod_ros.errors import ConfigError
+
+_S = TypeVar("_S")
 
 
 @dataclass(frozen=True)
@@ -59,6 +65,11 @@ class HealthSettings:
     residual_threshold: float = 5.0
     model_floor: float = 0.01
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], where: str = "health") -> HealthSettings:
+        """Strict reader of a parameter mapping; missing keys keep their defaults."""
+        return settings_from_dict(cls, data, where)
+
     def __post_init__(self) -> None:
         for name in ("min_valid_fraction", "saturation_fraction", "stuck_fraction"):
             v = getattr(self, name)
@@ -74,6 +85,24 @@ class HealthSettings:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ConfigError(f"health.{name}: must be finite and >= 0, got {v}")
+
+
+def settings_from_dict(cls: type[_S], data: Mapping[str, Any], where: str) -> _S:
+    """Build a settings dataclass of numbers from a mapping (ROS parameters, YAML), strictly.
+
+    Unknown keys are errors naming the key; fields annotated ``int`` must be integers; missing keys
+    keep the dataclass defaults; the dataclass validates ranges itself.
+    """
+    f = Fields(data, where)
+    kw: dict[str, Any] = {}
+    for fld in dataclasses.fields(cls):
+        if f.has(fld.name):
+            kw[fld.name] = f.integer(fld.name) if fld.type in ("int", int) else f.number(fld.name)
+    f.finish()
+    try:
+        return cls(**kw)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from exc
 
 
 @dataclass(frozen=True)
@@ -268,4 +297,4 @@ def fit_harmonics(
     )
 
 
-__all__ = ["ChannelFit", "HealthSettings", "cycle_times", "fit_harmonics"]
+__all__ = ["ChannelFit", "HealthSettings", "cycle_times", "fit_harmonics", "settings_from_dict"]

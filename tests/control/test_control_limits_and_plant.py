@@ -5,8 +5,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from synthetic_plant import nominal_response
 
-from ppod_ros.control import DeviceLimits, PlantModel, as_plant, peak_a
+from ppod_ros.control import DeviceLimits, LearningSettings, PlantModel, as_plant, peak_a
 from ppod_ros.errors import ConfigError
+from ppod_ros.estimation import HealthSettings
 
 complex_tables = arrays(
     complex, (3, 6), elements=st.complex_numbers(max_magnitude=3.0, allow_nan=False, allow_infinity=False)
@@ -91,3 +92,15 @@ def test_a_table_of_matrices_is_a_plant():
     table = {k: nominal_response([30.0 * k])[0] for k in (3, 1, 2)}
     plant = as_plant(table, 30.0, [1, 2, 3])
     assert plant.k.tolist() == [1, 2, 3] and plant.source == "table"
+
+
+def test_learning_and_health_settings_load_strictly_from_parameter_mappings():
+    s = LearningSettings.from_dict({"gain": 0.8, "divergence_iterations": 4})
+    assert s.gain == 0.8 and s.divergence_iterations == 4 and s.tolerance == 0.01
+    with pytest.raises(ConfigError, match="learning.colour"):
+        LearningSettings.from_dict({"colour": 1})
+    with pytest.raises(ConfigError, match="learning.divergence_iterations: expected an integer"):
+        LearningSettings.from_dict({"divergence_iterations": 2.5})
+    with pytest.raises(ConfigError, match="learning: learning.gain: must be in"):
+        LearningSettings.from_dict({"gain": 3.0})
+    assert HealthSettings.from_dict({"residual_threshold": 6}).residual_threshold == 6.0

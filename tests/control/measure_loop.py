@@ -1,6 +1,6 @@
 """Print the feedback core's figures on the synthetic rig (not a test; the tests check the bounds).
 
-    .venv/bin/python tests/control/measure_loop.py
+    .venv/bin/python -m tests.control.measure_loop
 
 Tables: estimation error against the rigid-body truth (LineSinkX, realistic noise, several seeds),
 closed-loop error per iteration for several goals and mismatches, and the core's own time per
@@ -11,22 +11,16 @@ the simulated device.
 from __future__ import annotations
 
 import math
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "estimation"))
-
-from plate_sim import readings, sample_times  # noqa: E402
-from rig import LAYOUT, NOISE_MPS2, RATE_HZ, Rig  # noqa: E402
-from synthetic_plant import SyntheticPlate, mismatched_response, nominal_response  # noqa: E402
-
-from ppod_ros.control import DeviceLimits, LearningController, PlantModel, run_learning  # noqa: E402
-from ppod_ros.estimation import AccelEstimator  # noqa: E402
-from ppod_ros.motion import PlateMotion, acceleration_error  # noqa: E402
+from ppod_ros.control import DeviceLimits, LearningController, PlantModel, run_learning
+from ppod_ros.estimation import AccelEstimator
+from ppod_ros.motion import PlateMotion, acceleration_error
+from tests.control.rig import LAYOUT, NOISE_MPS2, RATE_HZ, Rig
+from tests.control.synthetic_plant import SyntheticPlate, mismatched_response, nominal_response
+from tests.estimation.plate_sim import readings, sample_times
 
 GOALS = {
     "LineSinkX": PlateMotion(30, [1], [[10, 0, 0, 0, 100, 0]], [[0, 0, 0, 0, 3 * math.pi / 2, 0]]),

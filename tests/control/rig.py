@@ -9,10 +9,10 @@ Every command the rig receives is kept, so tests can check that none exceeded th
 from __future__ import annotations
 
 import numpy as np
-from plate_sim import readings, sample_times
-from synthetic_plant import SyntheticPlate
 
 from ppod_ros.estimation import AccelerometerLayout, AccelEstimator
+from tests.control.synthetic_plant import SyntheticPlate
+from tests.estimation.plate_sim import readings, sample_times
 
 LAYOUT = AccelerometerLayout.default()
 NOISE_MPS2 = 0.1

@@ -4,8 +4,6 @@ import math
 
 import numpy as np
 import pytest
-from rig import LAYOUT, Rig
-from synthetic_plant import SyntheticPlate, mismatched_response, nominal_response
 
 from ppod_ros.control import (
     CorrectionStore,
@@ -22,6 +20,8 @@ from ppod_ros.control import (
 from ppod_ros.errors import ConfigError, LimitError
 from ppod_ros.estimation import AccelEstimator, AccelRecording, read_recording, write_recording
 from ppod_ros.motion import PlateMotion
+from tests.control.rig import LAYOUT, Rig
+from tests.control.synthetic_plant import SyntheticPlate, mismatched_response, nominal_response
 
 LINE_SINK_X = PlateMotion(
     30, [1], [[10, 0, 0, 0, 100, 0]], [[0, 0, 0, 0, 3 * math.pi / 2, 0]], name="LineSinkX"

@@ -4,8 +4,6 @@ import math
 
 import numpy as np
 import pytest
-from rig import Rig
-from synthetic_plant import SyntheticPlate, mismatched_response, nominal_response
 
 from ppod_ros.control import (
     CONVERGED,
@@ -22,6 +20,8 @@ from ppod_ros.control import (
 )
 from ppod_ros.errors import ConfigError, LimitError
 from ppod_ros.motion import PlateMotion, acceleration_error
+from tests.control.rig import Rig
+from tests.control.synthetic_plant import SyntheticPlate, mismatched_response, nominal_response
 
 LINE_SINK_X = PlateMotion(
     30, [1], [[10, 0, 0, 0, 100, 0]], [[0, 0, 0, 0, 3 * math.pi / 2, 0]], name="LineSinkX"

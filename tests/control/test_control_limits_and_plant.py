@@ -3,11 +3,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from synthetic_plant import nominal_response
 
 from ppod_ros.control import DeviceLimits, LearningSettings, PlantModel, as_plant, peak_a
 from ppod_ros.errors import ConfigError
 from ppod_ros.estimation import HealthSettings
+from tests.control.synthetic_plant import nominal_response
 
 complex_tables = arrays(
     complex, (3, 6), elements=st.complex_numbers(max_magnitude=3.0, allow_nan=False, allow_infinity=False)

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from plate_sim import first_order_readings, readings, sample_times
 
 from ppod_ros.estimation import SECOND_ORDER_TERMS, AccelerometerLayout, AccelEstimator, fit_harmonics
 from ppod_ros.estimation.second_order import second_order_phasors
 from ppod_ros.motion import PlateMotion, acceleration_error
+from tests.estimation.plate_sim import first_order_readings, readings, sample_times
 
 LAYOUT = AccelerometerLayout.default()
 LINE_SINK_X = PlateMotion(

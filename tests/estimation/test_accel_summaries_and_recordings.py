@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-from plate_sim import readings, sample_times
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.estimation import (
@@ -19,6 +18,7 @@ from ppod_ros.estimation import (
 )
 from ppod_ros.estimation.recording import READERS
 from ppod_ros.motion import PlateMotion, acceleration_error
+from tests.estimation.plate_sim import readings, sample_times
 
 LAYOUT = AccelerometerLayout.default()
 GOAL = PlateMotion(30, [1], [[10, 0, 0, 0, 100, 0]], [[0, 0, 0, 0, 3 * math.pi / 2, 0]], name="LineSinkX")

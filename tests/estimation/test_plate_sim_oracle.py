@@ -1,9 +1,9 @@
 """The test oracle itself: exact rotations and derivatives, and the first-order limit."""
 
 import numpy as np
-from plate_sim import first_order_readings, plate_pose, readings, sample_times
 
 from ppod_ros.estimation import AccelerometerLayout, AccelEstimator, cycle_times
+from tests.estimation.plate_sim import first_order_readings, plate_pose, readings, sample_times
 
 LAYOUT = AccelerometerLayout.default()
 U = np.array([[3, -2, 1, 40, -60, 30], [1, 0.5, -1, 10, 5, -8]]) * np.exp(1j * np.arange(12).reshape(2, 6))

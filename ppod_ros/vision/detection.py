@@ -171,6 +171,10 @@ class BlobDetector:
         fg = cv2.bitwise_and(fg, self._work)
         # Component statistics come from the sorted pixel lists below: cheaper than OpenCV's.
         n, labels = cv2.connectedComponents(fg, connectivity=8, ltype=cv2.CV_32S)
+        if n > 65000:
+            raise BadFrameError(
+                f"frame has {n} foreground regions: noise, not parts (threshold too low?)", "noise"
+            )
         if n <= 1:
             return []
         return self._measure_all(crop, background, fg, labels, n)
@@ -205,24 +209,24 @@ class BlobDetector:
         width = crop.shape[1]
         # Support: foreground plus two pixels around it, where anti-aliased and blurred edges
         # fall. A pixel within two pixels of two blobs would mix both parts: it belongs to neither.
-        lab_f = labels.astype(np.float32)
-        near_max = cv2.dilate(lab_f, _K5)
-        inv = np.zeros_like(lab_f)
-        cv2.subtract((float(n + 1), 0.0, 0.0, 0.0), lab_f, dst=inv, mask=fg)
+        lab16 = labels.astype(np.uint16)
+        near_max = cv2.dilate(lab16, _K5)
+        inv = np.zeros_like(lab16)
+        cv2.subtract((float(n + 1), 0.0, 0.0, 0.0), lab16, dst=inv, mask=fg)
         near_inv = cv2.dilate(inv, _K5)  # n + 1 - (smallest label nearby), 0 if none
         support = cv2.bitwise_and(cv2.dilate(fg, _K5), self._work)
         idx = np.flatnonzero(support.view(bool))
         lab = labels.ravel()[idx]
         own = lab > 0
-        mx = near_max.ravel()[idx]
-        mn = np.float32(n + 1) - near_inv.ravel()[idx]
+        mx = near_max.ravel()[idx].astype(np.int32)
+        mn = (n + 1) - near_inv.ravel()[idx].astype(np.int32)
         unique = own | (mx == mn)
         # Blobs closer than the support's reach lose edge pixels to each other: flag them, since
         # their moments are no longer those of one whole part.
         crowded = np.zeros(n + 2, bool)
-        crowded[mx[~unique].astype(np.int64)] = True
-        crowded[mn[~unique].astype(np.int64)] = True
-        lab = np.where(own, lab, mx.astype(np.int32))
+        crowded[mx[~unique]] = True
+        crowded[mn[~unique]] = True
+        lab = np.where(own, lab, mx)
         idx, lab, own = idx[unique], lab[unique], own[unique]
         # Group the pixels by blob: every per-blob sum is then one contiguous reduction.
         order = np.argsort(lab, kind="stable")

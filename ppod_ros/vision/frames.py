@@ -23,8 +23,8 @@ class BadFrameError(ConfigError):
     """A camera frame was rejected; ``reason`` is a short machine-readable tag.
 
     Reasons: ``"empty"``, ``"not_array"``, ``"dtype"``, ``"size"``, ``"encoding"``,
-    ``"stamp"`` (non-finite or not after the previous frame), ``"dark"`` (nothing but noise:
-    the lamp is off or the lens is covered).
+    ``"stamp"`` (non-finite or not after the previous frame), ``"dark"`` (the plate is too dark
+    or overexposed: lamp off, lens covered, wrong exposure), ``"noise"`` (no parts, only noise).
     """
 
     def __init__(self, message: str, reason: str):

@@ -95,6 +95,8 @@ class PlateCalibration:
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
         self._cache["R"] = R
+        self._cache["centre"] = -R.T @ t
+        self._cache["centre"].setflags(write=False)
 
     @classmethod
     def nominal(cls, config: CameraConfig) -> PlateCalibration:
@@ -111,7 +113,7 @@ class PlateCalibration:
     @property
     def camera_centre_m(self) -> np.ndarray:
         """Optical centre (3,) in the plate frame (m)."""
-        return -self.rotation.T @ self.tvec
+        return self._cache["centre"]
 
     def plate_to_image(self, xy_m: Any, z_m: float = 0.0) -> np.ndarray:
         """Pixels (N, 2) of plate points (N, 2) at height ``z_m`` above the plate surface."""
@@ -139,11 +141,13 @@ class PlateCalibration:
     def height_scale(self, z_m: float) -> float:
         """Factor by which lengths on the plane z = ``z_m`` shrink, about the camera's foot point,
         relative to where the same pixels meet the plane z = 0 (1 - z / camera height)."""
-        return 1.0 - float(z_m) / float(self.camera_centre_m[2])
+        return 1.0 - float(z_m) / float(self._cache["centre"][2])
 
     def lift(self, xy0_m: np.ndarray, z_m: float) -> np.ndarray:
         """Move points found on the plane z = 0 to where the same rays meet the plane z = ``z_m``."""
-        c = self.camera_centre_m[:2]
+        if z_m == 0.0:
+            return np.asarray(xy0_m, dtype=float)
+        c = self._cache["centre"][:2]
         return c + (np.asarray(xy0_m, dtype=float) - c) * self.height_scale(z_m)
 
     def pixel_map(self, window: tuple[int, int, int, int] | None = None) -> PixelMap:

@@ -17,6 +17,7 @@ c_observed - R(theta) c_reference.
 
 from __future__ import annotations
 
+import cmath
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -112,7 +113,7 @@ class PartSpec:
     @property
     def centroid_m(self) -> np.ndarray:
         """Outline centroid in the body frame (m)."""
-        return self._ref["centroid"]
+        return np.array(self._ref["centroid"])
 
     @property
     def radius_m(self) -> float:
@@ -129,39 +130,42 @@ class PartSpec:
         """Scale-free rotation invariants: |R_2| / A^2 and the radial moment / A^2."""
         return self._ref["signature"]
 
+    def area_ratio(self, blob: Blob, calibration: PlateCalibration) -> float:
+        """Blob area, moved to this part's top-face plane, over the part's area (cheap pre-check)."""
+        hs = calibration.height_scale(self.height_m)
+        return blob.area_m2 * hs * hs / self._ref["area"]
+
     def fit(self, blob: Blob, calibration: PlateCalibration) -> PoseFit:
         """Pose of this part type that best explains ``blob`` (measured on z = 0)."""
-        s = calibration.height_scale(self.height_m)
-        centroid = calibration.lift(blob.centroid_m, self.height_m)
-        orders = np.arange(blob.moments.size)
-        M = blob.moments * s ** (orders + 2)
-        area = blob.area_m2 * s * s
-        radial2 = blob.radial2 * s**4
-        sig = _signature(M, radial2, area)
         ref = self._ref
-        R = ref["moments"][: M.size]
-        sym = ref["symmetry"]
+        hs = calibration.height_scale(self.height_m)
+        cx, cy = calibration.lift(blob.centroid_m, self.height_m)
+        raw = blob.moments.tolist()
+        used = [n for n in ref["orders"] if n < len(raw)]
+        # A top face at height h is seen scaled by hs about the camera's foot point: a moment
+        # of order n scales by hs^(n + 2).
+        M = {n: raw[n] * hs ** (n + 2) for n in used}
+        area = blob.area_m2 * hs * hs
+        shape = max(
+            abs(abs(M[2]) / area**2 - ref["signature"][0]),
+            abs(blob.radial2 * hs**4 / area**2 - ref["signature"][1]),
+        )
+        R = ref["moments_list"]
+        theta = 0.0 if ref["symmetry"] == 0.0 else _orientation(M, ref)
         # Misfit per order, relative to the size of a moment of that order (area * radius^n),
         # so that it reads the same for every part type: 0.01 is a 1 % mismatch.
-        used = [n for n in self.orders if n < M.size]
-        scale = ref["area"] * ref["radius"] ** np.array(used, dtype=float)
-        if sym == 0.0:
-            theta = 0.0
-            misfit = np.abs(M[used] - R[used]) / scale
-        else:
-            theta = _orientation(M, R, ref["quality"][: M.size], sym, used)
-            misfit = np.abs(M[used] - np.exp(1j * np.array(used) * theta) * R[used]) / scale
-        resid = float(misfit.max()) if misfit.size else 0.0
+        resid = max(
+            (abs(M[n] - cmath.exp(1j * n * theta) * R[n]) / ref["scale"][n] for n in used), default=0.0
+        )
         c, sn = math.cos(theta), math.sin(theta)
-        cref = ref["centroid"]
-        origin = centroid - np.array([c * cref[0] - sn * cref[1], sn * cref[0] + c * cref[1]])
+        rx, ry = ref["centroid"]
         return PoseFit(
-            float(origin[0]),
-            float(origin[1]),
+            float(cx - (c * rx - sn * ry)),
+            float(cy - (sn * rx + c * ry)),
             theta,
             area / ref["area"],
-            resid,
-            float(np.abs(sig - ref["signature"]).max()),
+            float(resid),
+            float(shape),
         )
 
 
@@ -178,24 +182,27 @@ class PoseFit:
     shape_distance: float
 
 
-def _orientation(M: np.ndarray, R: np.ndarray, quality: np.ndarray, sym: float, orders: list[int]) -> float:
-    """theta in [-sym/2, sym/2) with M_n ~ e^{i n theta} R_n over the given orders (>= 2)."""
-    n_sym = max(1, int(round(2 * math.pi / sym)))
-    q = np.zeros_like(quality)
-    q[orders] = quality[orders]
-    q[np.arange(q.size) % n_sym != 0] = 0.0
-    n_f = int(np.argmax(q))
-    base = (np.angle(M[n_f]) - np.angle(R[n_f])) / n_f
-    cands = base + 2 * math.pi * np.arange(max(1, n_f // n_sym)) / n_f
-    if cands.size > 1:
-        orders = np.arange(M.size)
-        use = q > 1e-3 * q.max()
-        w = (q[use] / np.maximum(np.abs(R[use]), 1e-300)) ** 2
-        score = [np.sum(w * np.real(M[use] * np.conj(R[use] * np.exp(1j * orders[use] * t)))) for t in cands]
-        theta = float(cands[int(np.argmax(score))])
-    else:
-        theta = float(base)
-    return wrap_angle(theta, sym)
+def _orientation(M: dict[int, complex], ref: dict[str, Any]) -> float:
+    """theta in [-sym/2, sym/2) with M_n ~ e^{i n theta} R_n.
+
+    The fine order n_f gives theta modulo 2 pi / n_f; among those n_f / n_sym candidates the one
+    whose rotated reference moments correlate best with the observed ones (weighted by each
+    order's signal-to-noise) is chosen.
+    """
+    n_f, R = ref["fine_order"], ref["moments_list"]
+    base = (cmath.phase(M[n_f]) - cmath.phase(R[n_f])) / n_f
+    n_cand = max(1, n_f // ref["n_sym"])
+    theta = base
+    if n_cand > 1:
+        best = -math.inf
+        for k in range(n_cand):
+            t = base + 2 * math.pi * k / n_f
+            score = sum(
+                w * (M[n] * R[n].conjugate() * cmath.exp(-1j * n * t)).real for n, w in ref["weights"]
+            )
+            if score > best:
+                best, theta = score, t
+    return wrap_angle(theta, ref["symmetry"])
 
 
 def wrap_angle(theta: float, period: float) -> float:
@@ -233,17 +240,23 @@ def _reference(fp: Footprint) -> dict[str, Any]:
         )
         radius = float(np.abs((v[:, 0] - centroid[0]) + 1j * (v[:, 1] - centroid[1])).max())
     n_sym = 0 if fp.symmetry_rad == 0 else max(1, int(round(2 * math.pi / fp.symmetry_rad)))
-    useful = [
-        n
-        for n in range(2, MAX_ORDER + 1)
-        if n_sym and n % n_sym == 0 and quality[n] >= 0.2 * quality[2 : MAX_ORDER + 1].max()
+    top = max(quality[2 : MAX_ORDER + 1].max(), 1e-300)
+    angle_orders = [
+        n for n in range(2, MAX_ORDER + 1) if n_sym and n % n_sym == 0 and quality[n] >= 0.2 * top
     ]
-    orders = tuple(sorted({2, *useful}))
+    orders = tuple(sorted({2, *angle_orders}))
+    fine = max(angle_orders, key=lambda n: quality[n]) if angle_orders else 0
+    weights = [(n, float((quality[n] / max(abs(moments[n]), 1e-300)) ** 2)) for n in angle_orders]
     return {
         "area": float(area),
         "moments": moments,
+        "moments_list": moments.tolist(),
         "orders": orders,
-        "centroid": centroid,
+        "fine_order": fine,
+        "n_sym": n_sym,
+        "weights": weights,
+        "scale": [float(area * radius**n) for n in range(n_max + 1)],
+        "centroid": (float(centroid[0]), float(centroid[1])),
         "radial2": float(radial2),
         "symmetry": fp.symmetry_rad,
         "quality": quality,

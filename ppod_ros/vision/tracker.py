@@ -367,10 +367,11 @@ class PartTracker:
         # Blobs are measured on the plate surface, where a raised top face looks larger.
         biggest = max(p.area_m2 / cal.height_scale(p.height_m) ** 2 for p in self.specs)
         for blob in blobs:
-            best, best_score, area_ratio_min = None, math.inf, math.inf
+            best, best_score = None, math.inf
             for spec in self.specs:
+                if abs(spec.area_ratio(blob, cal) - 1) > s.area_tolerance:
+                    continue
                 fit = spec.fit(blob, cal)
-                area_ratio_min = min(area_ratio_min, fit.area_ratio)
                 if (
                     abs(fit.area_ratio - 1) <= s.area_tolerance
                     and fit.shape_distance <= s.shape_tolerance

@@ -218,11 +218,13 @@ def calibrate_plate_from_checkerboard(
     local = board.object_points()[:, :2]
     obj_xy = local @ np.array([[c, s], [-s, c]]) + np.array([x, y])
     obj = np.concatenate([obj_xy, np.zeros((len(obj_xy), 1))], axis=1)
-    # OpenCV may return the corners starting from either end: keep the order that matches the
-    # nominal projection of the board.
-    expected = nominal.plate_to_image(obj_xy)
-    if np.linalg.norm(corners[0] - expected[0]) > np.linalg.norm(corners[-1] - expected[0]):
-        corners = corners[::-1].copy()
+    # OpenCV may return the rows and the corners within them in either direction: keep the order
+    # that matches the nominal projection of the board (corner spacing >> nominal pose error).
+    expected = nominal.plate_to_image(obj_xy).reshape(board.rows, board.cols, 2)
+    grid = corners.reshape(board.rows, board.cols, 2)
+    candidates = [grid, grid[::-1, ::-1], grid[::-1, :], grid[:, ::-1]]
+    best = min(candidates, key=lambda g: float(np.mean(np.linalg.norm(g - expected, axis=2))))
+    corners = best.reshape(-1, 2).copy()
     rvec, tvec = _solve_planar_pose(obj, corners, nominal)
     rms = float(np.sqrt(np.mean(_reprojection_errors(obj, corners, rvec, tvec, nominal) ** 2)))
     return PlateCalibration(

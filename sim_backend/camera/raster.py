@@ -78,7 +78,28 @@ def downsample(canvas: np.ndarray, ss: int) -> np.ndarray:
 def _to_fixed(poly_px: np.ndarray, origin: tuple[int, int], ss: int) -> np.ndarray:
     # Sub-pixel k of the canvas has its centre at image coordinate origin - 0.5 + (k + 0.5) / ss.
     p = (np.asarray(poly_px, dtype=float) - np.array(origin, dtype=float) + 0.5) * ss - 0.5
+    # cv2.fillPoly also fills sub-pixels whose centres round onto the outline: a shape grows by
+    # 0.4-0.55 sub-pixel per edge, depending on the edge's direction. Moving the outline 0.4
+    # sub-pixel inwards leaves areas within 0.2 % (measured on rotated rectangles and disks).
+    p = _offset_inwards(p, 0.4)
     return np.round(p * (1 << _SHIFT)).astype(np.int32).reshape(-1, 1, 2)
+
+
+def _offset_inwards(p: np.ndarray, d: float) -> np.ndarray:
+    """Polygon (M, 2) with every edge moved ``d`` inwards (mitred corners)."""
+    keep = np.any(np.abs(p - np.roll(p, 1, axis=0)) > 1e-9, axis=1)
+    p = p[keep]
+    if len(p) < 3:
+        return p
+    e = np.roll(p, -1, axis=0) - p
+    e /= np.hypot(e[:, 0], e[:, 1])[:, None]
+    signed = 0.5 * np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
+    # Inward normal of each edge: left of the direction of travel for a positive (counter-
+    # clockwise in these axes) polygon, right otherwise.
+    n = np.stack([-e[:, 1], e[:, 0]], axis=1) * (1.0 if signed > 0 else -1.0)
+    n_prev = np.roll(n, 1, axis=0)
+    denom = np.maximum(1.0 + np.sum(n * n_prev, axis=1), 1e-6)
+    return p + d * (n + n_prev) / denom[:, None]
 
 
 def window_of(

@@ -34,6 +34,9 @@ from ppod_ros.vision.geometry import PlateCalibration
 
 _K3 = np.ones((3, 3), np.uint8)
 _K5 = np.ones((5, 5), np.uint8)
+#: Reach of the ring of plate pixels that gives each blob its local plate brightness (4 px: the
+#: ring is the two pixels just outside a blob's support).
+_K_RING = np.ones((9, 9), np.uint8)
 
 
 @dataclass(frozen=True)
@@ -202,6 +205,39 @@ class BlobDetector:
         small = cv2.GaussianBlur(small, (0, 0), 1.0, borderType=cv2.BORDER_REPLICATE)
         return cv2.resize(small, (crop.shape[1], crop.shape[0]), interpolation=cv2.INTER_LINEAR)
 
+    def _local_background(self, crop: np.ndarray, fg: np.ndarray, support: np.ndarray, labels16: np.ndarray,
+                          ids: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """Per blob, a plane I = a + b u + c v fitted to the plate pixels 3 to 4 pixels around it.
+
+        The global background is an opening, which is biased near parts on a lighting gradient
+        (a part hides the plate's darkest pixels from it); the ring around each blob sees the
+        plate's brightness right there. Returns (coefficients (len(ids), 3), usable (len(ids),)),
+        or None when no blob has a ring.
+        """
+        ring = cv2.bitwise_and(cv2.dilate(fg, _K_RING), self._work)
+        ring[support.view(bool)] = 0
+        ridx = np.flatnonzero(ring.view(bool))
+        if ridx.size == 0:
+            return None
+        # Ring pixels belong to the blob with the largest label within reach: any plate pixel
+        # near a blob serves its fit, so sharing needs no tie-break.
+        rlab = cv2.dilate(labels16, _K_RING).ravel()[ridx]
+        width = crop.shape[1]
+        u = (ridx % width).astype(np.float64)
+        v = (ridx // width).astype(np.float64)
+        val = crop.ravel()[ridx].astype(np.float64)
+        cols = [np.ones_like(u), u, v, u * u, u * v, v * v, val, u * val, v * val]
+        sums = np.stack([np.bincount(rlab, w, minlength=n + 1) for w in cols], axis=1)[ids]
+        A = sums[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
+        rhs = sums[:, 6:9]
+        ok = sums[:, 0] >= 12
+        A[~ok] = np.eye(3)
+        det = np.linalg.det(A)
+        ok &= np.abs(det) > 1e-9 * np.abs(A[:, 0, 0] * A[:, 1, 1] * A[:, 2, 2]) + 1e-300
+        A[~ok] = np.eye(3)
+        coef = np.linalg.solve(A, rhs[..., None])[..., 0]
+        return coef.astype(np.float32), ok
+
     def _measure_all(
         self, crop: np.ndarray, background: np.ndarray, fg: np.ndarray, labels: np.ndarray, n: int
     ) -> list[Blob]:
@@ -234,7 +270,17 @@ class BlobDetector:
         starts = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]])
         ids = lab[starts]
         area_px = np.add.reduceat(own.astype(np.int64), starts)
-        ratio = crop.ravel()[idx].astype(np.float32) / background.ravel()[idx]
+        counts = np.diff(np.r_[starts, idx.size])
+        local = self._local_background(crop, fg, support, lab16, ids, n)
+        plate_level = background.ravel()[idx]
+        if local is not None:
+            # Each blob's own plane of plate brightness, where its ring of plate pixels allowed one.
+            coef, ok = local
+            uu, vv = (idx % width).astype(np.float32), (idx // width).astype(np.float32)
+            c = np.repeat(coef, counts, axis=0)
+            planar = c[:, 0] + c[:, 1] * uu + c[:, 2] * vv
+            plate_level = np.where(np.repeat(ok, counts), planar, plate_level)
+        ratio = crop.ravel()[idx].astype(np.float32) / plate_level
         # kappa, the part-to-plate brightness ratio, on each blob's interior (2 px inside its
         # edge); thin blobs without an interior use their most extreme pixel.
         interior = cv2.erode(fg, _K5, borderType=cv2.BORDER_CONSTANT, borderValue=0).ravel()[idx].astype(bool)
@@ -245,7 +291,6 @@ class BlobDetector:
             extreme = (np.maximum if s.polarity == "bright" else np.minimum).reduceat(ratio, starts)
             kappa = np.where(thin, extreme, kappa)
         denom = np.where(np.abs(kappa - 1.0) > 0.05, kappa - 1.0, np.inf)
-        counts = np.diff(np.r_[starts, idx.size])
         mass = (ratio - 1.0) * self._dA.ravel()[idx] / np.repeat(denom, counts)
         mass = mass.astype(np.float64)
         x = self._x.ravel()[idx].astype(np.float64)

@@ -27,7 +27,7 @@ class FilterSettings:
     """
 
     accel_mps2: float = 0.05
-    alpha_radps2: float = 1.0
+    alpha_radps2: float = 0.3
     sigma_pos_m: float = 5e-5
     sigma_theta_rad: float = 1.5e-3
     initial_speed_mps: float = 0.05
@@ -103,6 +103,14 @@ class PoseFilter:
         self._y.update(y_m - self._y.p, rp)
         if self._t is not None:
             self._t.update(self.theta_innovation(theta_rad), self.settings.sigma_theta_rad**2)
+
+    def hold(self) -> None:
+        """Set the velocity to zero (a part pressed against another stops moving relative to it:
+        predicting it onward would carry it through its neighbour)."""
+        for axis in (self._x, self._y, self._t):
+            if axis is not None:
+                axis.v = 0.0
+                axis.b = 0.0
 
     def theta_innovation(self, theta_rad: float) -> float:
         """Measured minus predicted theta, wrapped by the symmetry period (0 without theta)."""

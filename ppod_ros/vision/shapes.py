@@ -187,7 +187,7 @@ def _orientation(M: dict[int, complex], ref: dict[str, Any]) -> float:
 
     The fine order n_f gives theta modulo 2 pi / n_f; among those n_f / n_sym candidates the one
     whose rotated reference moments correlate best with the observed ones (weighted by each
-    order's signal-to-noise) is chosen.
+    order's signal-to-noise) is chosen, then refined by the weighted mean of all orders.
     """
     n_f, R = ref["fine_order"], ref["moments_list"]
     base = (cmath.phase(M[n_f]) - cmath.phase(R[n_f])) / n_f
@@ -197,11 +197,20 @@ def _orientation(M: dict[int, complex], ref: dict[str, Any]) -> float:
         best = -math.inf
         for k in range(n_cand):
             t = base + 2 * math.pi * k / n_f
-            score = sum(
-                w * (M[n] * R[n].conjugate() * cmath.exp(-1j * n * t)).real for n, w in ref["weights"]
-            )
+            rotated = ((M[n] * R[n].conjugate() * cmath.exp(-1j * n * t)).real for n, _ in ref["weights"])
+            score = sum(w * r for (_, w), r in zip(ref["weights"], rotated))
             if score > best:
                 best, theta = score, t
+    # Refine with every order: each gives theta modulo 2 pi / n near the chosen candidate; their
+    # weighted mean averages out noise and the small order-to-order biases of pixel sampling.
+    num = den = 0.0
+    for n, w in ref["refine_weights"]:
+        d = (cmath.phase(M[n]) - cmath.phase(R[n])) / n - theta
+        period = 2 * math.pi / n
+        num += w * ((d + period / 2) % period - period / 2)
+        den += w
+    if den > 0:
+        theta += num / den
     return wrap_angle(theta, ref["symmetry"])
 
 
@@ -247,6 +256,9 @@ def _reference(fp: Footprint) -> dict[str, Any]:
     orders = tuple(sorted({2, *angle_orders}))
     fine = max(angle_orders, key=lambda n: quality[n]) if angle_orders else 0
     weights = [(n, float((quality[n] / max(abs(moments[n]), 1e-300)) ** 2)) for n in angle_orders]
+    # Measured on rendered parts, higher orders are noisier than the area-only noise model says
+    # (pixels outside the part, at the largest radii, weigh most): down-weight them by 1/n.
+    refine_weights = [(n, float(quality[n] ** 2 / n)) for n in angle_orders]
     return {
         "area": float(area),
         "moments": moments,
@@ -255,6 +267,7 @@ def _reference(fp: Footprint) -> dict[str, Any]:
         "fine_order": fine,
         "n_sym": n_sym,
         "weights": weights,
+        "refine_weights": refine_weights,
         "scale": [float(area * radius**n) for n in range(n_max + 1)],
         "centroid": (float(centroid[0]), float(centroid[1])),
         "radial2": float(radial2),

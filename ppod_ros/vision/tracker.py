@@ -17,7 +17,8 @@ constant-velocity filter (:mod:`~ppod_ros.vision.kalman`) and matched to fitted 
 label by the Hungarian method on distance, within a gate that grows with the track's uncertainty.
 
 Status (same numbers as ppod_msgs/PartPose): TRACKED = measured in this frame; PREDICTED = not
-measured (``reason`` says why: merged, touching, occluded, edge, out_of_view, missed), pose from the filter;
+measured (``reason`` says why: merged, touching, occluded, edge, out_of_view, missed), pose from the filter
+(a part in contact with another is held still: parts cannot pass through each other);
 LOST = not measured for longer than ``max_coast_s``: the pose is the last measured one. A lost
 part that reappears within ``reacquire_radius_m`` of where it was lost, with no other lost part of
 its type as close, gets its id back (``reacquired``); otherwise a new id. Dropped frames only
@@ -511,6 +512,8 @@ class PartTracker:
             if reason == "missed" and not (x0 + r <= px <= x1 - r and y0 + r <= py <= y1 - r):
                 reason = "out_of_view"
             tr.reason = reason
+            if reason in ("merged", "touching"):
+                tr.filter.hold()
             if stamp - tr.last_measured_s > s.max_coast_s:
                 tr.status = TrackStatus.LOST
                 lost.append(tr.id)

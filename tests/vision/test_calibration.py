@@ -9,11 +9,18 @@ import math
 
 import numpy as np
 import pytest
+from ppod_sim.camera import CameraRenderer, Occluder, board_pose_flat, tilted_board_pose
 
 from ppod_ros.errors import ConfigError
-from ppod_ros.vision import (CalibrationError, Checkerboard, PlateCalibration, calibrate_intrinsics,
-                             calibrate_plate_from_checkerboard, calibrate_plate_from_markers, detect_markers)
-from ppod_sim.camera import CameraRenderer, Occluder, board_pose_flat, tilted_board_pose
+from ppod_ros.vision import (
+    CalibrationError,
+    Checkerboard,
+    PlateCalibration,
+    calibrate_intrinsics,
+    calibrate_plate_from_checkerboard,
+    calibrate_plate_from_markers,
+    detect_markers,
+)
 
 
 def work_area_grid(camera, n=9):
@@ -56,8 +63,15 @@ def test_markers_calibrate_the_plate_where_the_triggered_camera_sees_it(camera, 
 
 
 def test_too_few_visible_markers_is_an_error_that_says_so(camera, nominal_camera, renderer):
-    hide = [Occluder(np.array([[x - 0.02, y - 0.02], [x + 0.02, y - 0.02], [x + 0.02, y + 0.02],
-                               [x - 0.02, y + 0.02]]), 0.01) for _, x, y in camera.plate.markers[:6]]
+    hide = [
+        Occluder(
+            np.array(
+                [[x - 0.02, y - 0.02], [x + 0.02, y - 0.02], [x + 0.02, y + 0.02], [x - 0.02, y + 0.02]]
+            ),
+            0.01,
+        )
+        for _, x, y in camera.plate.markers[:6]
+    ]
     frame = renderer.render([], occluders=hide)
     with pytest.raises(CalibrationError, match="found 2 of the plate's 8 markers"):
         calibrate_plate_from_markers(frame.image, nominal_camera)
@@ -83,9 +97,18 @@ def test_intrinsics_from_tilted_checkerboard_views_reproduce_the_true_projection
     renderer = CameraRenderer(camera, seed=11)
     board = Checkerboard(9, 6, 0.022)
     views = []
-    for i, (tx, ty, yaw, z) in enumerate([(0.35, 0.0, 0.1, 0.05), (-0.35, 0.1, -0.2, 0.08), (0.0, 0.4, 0.3, 0.1),
-                                          (0.1, -0.4, 0.0, 0.06), (0.3, 0.3, 1.2, 0.12), (-0.3, -0.25, 2.0, 0.1),
-                                          (0.2, -0.1, -1.0, 0.15), (-0.15, 0.3, 0.6, 0.04)]):
+    for i, (tx, ty, yaw, z) in enumerate(
+        [
+            (0.35, 0.0, 0.1, 0.05),
+            (-0.35, 0.1, -0.2, 0.08),
+            (0.0, 0.4, 0.3, 0.1),
+            (0.1, -0.4, 0.0, 0.06),
+            (0.3, 0.3, 1.2, 0.12),
+            (-0.3, -0.25, 2.0, 0.1),
+            (0.2, -0.1, -1.0, 0.15),
+            (-0.15, 0.3, 0.6, 0.04),
+        ]
+    ):
         # Centre the board below the camera, then tilt it about its centre.
         rvec, _ = tilted_board_pose(0, 0, 0, tx, ty, yaw)
         import cv2
@@ -100,8 +123,9 @@ def test_intrinsics_from_tilted_checkerboard_views_reproduce_the_true_projection
     # What matters downstream: with these intrinsics, the markers give the true plate mapping
     # (the plate pose absorbs the small principal-point error of a few views).
     true = PlateCalibration.nominal(camera)
-    start = PlateCalibration(result.camera_matrix, result.dist_coeffs, true.rvec, true.tvec, camera.width,
-                             camera.height)
+    start = PlateCalibration(
+        result.camera_matrix, result.dist_coeffs, true.rvec, true.tvec, camera.width, camera.height
+    )
     cal = calibrate_plate_from_markers(renderer.render([]).image, start, camera.plate)
     assert mapping_error_m(cal, true, work_area_grid(camera)) < 1e-4
 

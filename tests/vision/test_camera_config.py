@@ -78,6 +78,7 @@ def test_marker_corners_follow_the_aruco_order_upright_on_the_plate():
     layout = PlateLayout(markers=((5, 0.1, -0.1),))
     c = layout.marker_corners()[5]
     s = layout.marker_size_m / 2
-    np.testing.assert_allclose(c, [[0.1 - s, -0.1 + s], [0.1 + s, -0.1 + s], [0.1 + s, -0.1 - s],
-                                   [0.1 - s, -0.1 - s]])
+    np.testing.assert_allclose(
+        c, [[0.1 - s, -0.1 + s], [0.1 + s, -0.1 + s], [0.1 + s, -0.1 - s], [0.1 - s, -0.1 - s]]
+    )
     assert math.isclose(np.linalg.norm(c[0] - c[1]), layout.marker_size_m)

@@ -46,6 +46,7 @@ from ppod_ros.vision.tracker import (
     TrackStatus,
     UnexplainedBlob,
     load_part_specs,
+    load_tracker_config,
 )
 
 __all__ = [
@@ -82,6 +83,7 @@ __all__ = [
     "detect_markers",
     "find_checkerboard",
     "load_part_specs",
+    "load_tracker_config",
     "open_source",
     "save_npz_recording",
     "wrap_angle",

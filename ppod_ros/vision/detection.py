@@ -205,8 +205,15 @@ class BlobDetector:
         small = cv2.GaussianBlur(small, (0, 0), 1.0, borderType=cv2.BORDER_REPLICATE)
         return cv2.resize(small, (crop.shape[1], crop.shape[0]), interpolation=cv2.INTER_LINEAR)
 
-    def _local_background(self, crop: np.ndarray, fg: np.ndarray, support: np.ndarray, labels16: np.ndarray,
-                          ids: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+    def _local_background(
+        self,
+        crop: np.ndarray,
+        fg: np.ndarray,
+        support: np.ndarray,
+        labels16: np.ndarray,
+        ids: np.ndarray,
+        n: int,
+    ) -> tuple[np.ndarray, np.ndarray] | None:
         """Per blob, a plane I = a + b u + c v fitted to the plate pixels 3 to 4 pixels around it.
 
         The global background is an opening, which is biased near parts on a lighting gradient

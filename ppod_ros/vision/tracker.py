@@ -32,12 +32,13 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ppod_ros.config.fields import Fields
+from ppod_ros.config.fields import Fields, load_yaml_file
 from ppod_ros.errors import ConfigError
 from ppod_ros.vision.calibration import calibrate_plate_from_markers
 from ppod_ros.vision.camera import CameraConfig
@@ -565,6 +566,28 @@ def load_part_specs(items: Sequence[Mapping[str, Any]], where: str = "parts") ->
     return [PartSpec.from_dict(item, f"{where}[{i}]") for i, item in enumerate(items)]
 
 
+def load_tracker_config(source: str | Path | Mapping[str, Any]) -> tuple[list[PartSpec], TrackerSettings]:
+    """Part types and settings from a tracker YAML file (or its parsed mapping)::
+
+    parts:
+      - {label: washer, footprint: {disk: 0.006}, height_m: 0.002}
+      - {label: bracket, part: {type: rigid, ...}, height_m: 0.004}   # a PART.yaml mapping
+    settings: {max_coast_s: 2.0, detector: {polarity: dark}}          # optional
+    """
+    if isinstance(source, Mapping):
+        data, origin = source, "tracker"
+    else:
+        data, origin = load_yaml_file(source, "tracker"), str(source)
+    try:
+        f = Fields(data, "")
+        specs = load_part_specs(f.raw("parts"), "parts")
+        settings = TrackerSettings.from_dict(f.raw("settings", {}) or {}, "settings")
+        f.finish()
+    except ConfigError as exc:
+        raise ConfigError(f"{origin}: {exc}") from exc
+    return specs, settings
+
+
 __all__ = [
     "PartTracker",
     "TrackResult",
@@ -573,4 +596,5 @@ __all__ = [
     "TrackerSettings",
     "UnexplainedBlob",
     "load_part_specs",
+    "load_tracker_config",
 ]

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from ppod_sim.camera import CameraRenderer, Lighting, Occluder, RenderPart
+from ppod_sim.camera import CameraRenderer, Lighting, Occluder, RenderPart, SceneStyle
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.parts import Footprint
@@ -19,6 +19,7 @@ from ppod_ros.vision import (
     TrackerSettings,
     TrackStatus,
     load_part_specs,
+    load_tracker_config,
     wrap_angle,
 )
 
@@ -246,6 +247,39 @@ def test_tracker_settings_and_part_lists_load_strictly():
     assert [p.label for p in specs] == ["a", "b"]
     with pytest.raises(ConfigError, match=r"parts\[0\]"):
         load_part_specs([{"label": "a"}])
+
+
+def test_a_tracker_yaml_gives_part_types_and_settings(tmp_path):
+    path = tmp_path / "tracker.yaml"
+    path.write_text(
+        "parts:\n"
+        "  - {label: washer, footprint: {disk: 0.006}, height_m: 0.002}\n"
+        "  - {label: bracket, part: {type: rigid, mass: 0.02, inertia: [1.0e-5, 1.0e-6, 1.0e-5],\n"
+        "     contacts: [[0.01, -0.03, -0.002], [0.0, 0.03, -0.002], [-0.01, -0.03, -0.002]]}}\n"
+        "settings: {max_coast_s: 2.5}\n"
+    )
+    specs, settings = load_tracker_config(path)
+    assert [s.label for s in specs] == ["washer", "bracket"] and settings.max_coast_s == 2.5
+    assert specs[1].footprint.kind == "polygon"
+    path.write_text("parts: []\nextra: 1\n")
+    with pytest.raises(ConfigError, match="tracker.yaml: unknown key: extra"):
+        load_tracker_config(path)
+
+
+def test_dark_parts_on_a_bright_plate_are_tracked_with_the_dark_polarity(camera, calibration):
+    renderer = CameraRenderer(camera, seed=5, style=SceneStyle(plate=0.7))
+    settings = TrackerSettings.from_dict({"detector": {"polarity": "dark"}})
+    tracker = PartTracker(camera, [PIN, WASHER, TAB], settings, calibration=calibration)
+    placed = [(PIN, (-0.05, 0.02, 0.7)), (WASHER, (0.0, -0.04, 0.0)), (TAB, (0.06, 0.05, -2.0))]
+    frame = renderer.render(
+        [RenderPart.of(s.label, s.footprint, p, s.height_m, reflectance=0.08) for s, p in placed], 0.0
+    )
+    result = tracker.update(frame.image, 0.0)
+    assert len(result.parts) == 3 and not result.unexplained
+    for spec, pose in placed:
+        report = nearest(result, pose)
+        assert report.label == spec.label and report.status == TrackStatus.TRACKED
+        check_pose(report, pose)
 
 
 def test_tracker_rejects_duplicate_labels_and_mismatched_calibrations(camera, calibration):

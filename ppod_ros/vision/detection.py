@@ -133,9 +133,10 @@ class BlobDetector:
         r0, r1, c0, c1 = int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
         wu, wv = pm.window[:2]
         self._crop = (wu + c0, wv + r0, wu + c1, wv + r1)
-        self._x = pm.x_m[r0:r1, c0:c1]
-        self._y = pm.y_m[r0:r1, c0:c1]
-        self._dA = pm.area_m2[r0:r1, c0:c1]
+        # Contiguous copies: the per-frame gathers index their flattened views.
+        self._x = np.ascontiguousarray(pm.x_m[r0:r1, c0:c1])
+        self._y = np.ascontiguousarray(pm.y_m[r0:r1, c0:c1])
+        self._dA = np.ascontiguousarray(pm.area_m2[r0:r1, c0:c1])
         work = inside[r0:r1, c0:c1].astype(np.uint8)
         self._work = work  # 0/1, so that masks combined with it stay 0/1 (viewable as bool)
         band = work.astype(bool) & ~cv2.erode(
@@ -166,14 +167,15 @@ class BlobDetector:
         """Blobs in a grey (H, W) uint8 frame of the calibrated size."""
         s = self.settings
         u0, v0, u1, v1 = self._crop
-        crop = gray[v0:v1, u0:u1]
+        crop = np.ascontiguousarray(gray[v0:v1, u0:u1])
         background = self._background(crop)
         bright = s.polarity == "bright"
         thr = cv2.convertScaleAbs(background, alpha=s.threshold_ratio if bright else 1.0 / s.threshold_ratio)
         fg = cv2.compare(crop, thr, cv2.CMP_GT if bright else cv2.CMP_LT)
         fg = cv2.bitwise_and(fg, self._work)
         # Component statistics come from the sorted pixel lists below: cheaper than OpenCV's.
-        n, labels = cv2.connectedComponents(fg, connectivity=8, ltype=cv2.CV_32S)
+        # 16-bit labels: OpenCV's morphology below works on them directly.
+        n, labels = cv2.connectedComponents(fg, connectivity=8, ltype=cv2.CV_16U)
         if n > 65000:
             raise BadFrameError(
                 f"frame has {n} foreground regions: noise, not parts (threshold too low?)", "noise"
@@ -237,10 +239,15 @@ class BlobDetector:
         sums = np.stack([np.bincount(rlab, w, minlength=n + 1) for w in cols], axis=1)[ids]
         A = sums[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
         rhs = sums[:, 6:9]
-        ok = sums[:, 0] >= 12
-        A[~ok] = np.eye(3)
-        det = np.linalg.det(A)
-        ok &= np.abs(det) > 1e-9 * np.abs(A[:, 0, 0] * A[:, 1, 1] * A[:, 2, 2]) + 1e-300
+        # A ring surrounds its blob, so its normal equations are well conditioned; a ring cut
+        # short by the work area's edge may not be: those blobs keep the global background.
+        a, b, c = A[:, 0], A[:, 1], A[:, 2]
+        det = (
+            a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1])
+            - a[:, 1] * (b[:, 0] * c[:, 2] - b[:, 2] * c[:, 0])
+            + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0])
+        )
+        ok = (sums[:, 0] >= 12) & (np.abs(det) > 1e-9 * np.abs(a[:, 0] * b[:, 1] * c[:, 2]) + 1e-300)
         A[~ok] = np.eye(3)
         coef = np.linalg.solve(A, rhs[..., None])[..., 0]
         return coef.astype(np.float32), ok
@@ -252,14 +259,14 @@ class BlobDetector:
         width = crop.shape[1]
         # Support: foreground plus two pixels around it, where anti-aliased and blurred edges
         # fall. A pixel within two pixels of two blobs would mix both parts: it belongs to neither.
-        lab16 = labels.astype(np.uint16)
+        lab16 = labels
         near_max = cv2.dilate(lab16, _K5)
         inv = np.zeros_like(lab16)
         cv2.subtract((float(n + 1), 0.0, 0.0, 0.0), lab16, dst=inv, mask=fg)
         near_inv = cv2.dilate(inv, _K5)  # n + 1 - (smallest label nearby), 0 if none
         support = cv2.bitwise_and(cv2.dilate(fg, _K5), self._work)
         idx = np.flatnonzero(support.view(bool))
-        lab = labels.ravel()[idx]
+        lab = labels.ravel()[idx].astype(np.int32)
         own = lab > 0
         mx = near_max.ravel()[idx].astype(np.int32)
         mn = (n + 1) - near_inv.ravel()[idx].astype(np.int32)

@@ -135,8 +135,12 @@ class PartSpec:
         hs = calibration.height_scale(self.height_m)
         return blob.area_m2 * hs * hs / self._ref["area"]
 
-    def fit(self, blob: Blob, calibration: PlateCalibration) -> PoseFit:
-        """Pose of this part type that best explains ``blob`` (measured on z = 0)."""
+    def fit(self, blob: Blob, calibration: PlateCalibration, shape_limit: float = math.inf) -> PoseFit:
+        """Pose of this part type that best explains ``blob`` (measured on z = 0).
+
+        With ``shape_limit``, a blob whose shape invariants differ by more is not fitted: the
+        result then has theta NaN and an infinite moment residual (a cheap rejection).
+        """
         ref = self._ref
         hs = calibration.height_scale(self.height_m)
         cx, cy = calibration.lift(blob.centroid_m, self.height_m)
@@ -150,6 +154,8 @@ class PartSpec:
             abs(abs(M[2]) / area**2 - ref["signature"][0]),
             abs(blob.radial2 * hs**4 / area**2 - ref["signature"][1]),
         )
+        if shape > shape_limit:
+            return PoseFit(math.nan, math.nan, math.nan, area / ref["area"], math.inf, float(shape))
         R = ref["moments_list"]
         theta = 0.0 if ref["symmetry"] == 0.0 else _orientation(M, ref)
         # Misfit per order, relative to the size of a moment of that order (area * radius^n),
@@ -194,11 +200,14 @@ def _orientation(M: dict[int, complex], ref: dict[str, Any]) -> float:
     n_cand = max(1, n_f // ref["n_sym"])
     theta = base
     if n_cand > 1:
+        # score(t) = sum_n w_n Re(M_n conj(R_n) e^{-i n t}): the correlation of the observed
+        # moments with the reference rotated by t.
+        terms = [(n, w * M[n] * R[n].conjugate()) for n, w in ref["weights"]]
         best = -math.inf
         for k in range(n_cand):
             t = base + 2 * math.pi * k / n_f
-            rotated = ((M[n] * R[n].conjugate() * cmath.exp(-1j * n * t)).real for n, _ in ref["weights"])
-            score = sum(w * r for (_, w), r in zip(ref["weights"], rotated))
+            e = cmath.exp(-1j * t)
+            score = sum((p * e**n).real for n, p in terms)
             if score > best:
                 best, theta = score, t
     # Refine with every order: each gives theta modulo 2 pi / n near the chosen candidate; their

@@ -373,7 +373,7 @@ class PartTracker:
             for spec in self.specs:
                 if abs(spec.area_ratio(blob, cal) - 1) > s.area_tolerance:
                     continue
-                fit = spec.fit(blob, cal)
+                fit = spec.fit(blob, cal, s.shape_tolerance)
                 if (
                     abs(fit.area_ratio - 1) <= s.area_tolerance
                     and fit.shape_distance <= s.shape_tolerance
@@ -402,16 +402,13 @@ class PartTracker:
         active = [i for i, tr in enumerate(self._tracks) if tr.status != TrackStatus.LOST]
         if not active or not measurements:
             return {}
-        cost = np.full((len(active), len(measurements)), _FAR)
-        for r, i in enumerate(active):
-            tr = self._tracks[i]
-            px, py = tr.filter.position
-            gate = max(s.gate_m, s.gate_sigmas * tr.filter.position_sigma_m())
-            for c, m in enumerate(measurements):
-                if m.spec is tr.spec:
-                    d = math.hypot(m.fit.x_m - px, m.fit.y_m - py)
-                    if d <= gate:
-                        cost[r, c] = d
+        pred = np.array([self._tracks[i].filter.position for i in active])
+        sigma = np.array([self._tracks[i].filter.position_sigma_m() for i in active])
+        gate = np.maximum(s.gate_m, s.gate_sigmas * sigma)
+        meas = np.array([(m.fit.x_m, m.fit.y_m) for m in measurements])
+        same = np.array([[m.spec is self._tracks[i].spec for m in measurements] for i in active])
+        dist = np.hypot(pred[:, None, 0] - meas[None, :, 0], pred[:, None, 1] - meas[None, :, 1])
+        cost = np.where(same & (dist <= gate[:, None]), dist, _FAR)
         rows, cols = linear_sum_assignment(cost)
         matched = {}
         for r, c in zip(rows, cols):

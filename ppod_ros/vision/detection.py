@@ -223,8 +223,8 @@ class BlobDetector:
         plate's brightness right there. Returns (coefficients (len(ids), 3), usable (len(ids),)),
         or None when no blob has a ring.
         """
-        ring = cv2.bitwise_and(cv2.dilate(fg, _K_RING), self._work)
-        ring[support.view(bool)] = 0
+        # Masks are 0/1: the saturating subtraction removes the support from the reach.
+        ring = cv2.subtract(cv2.bitwise_and(cv2.dilate(fg, _K_RING), self._work), support)
         ridx = np.flatnonzero(ring.view(bool))
         if ridx.size == 0:
             return None

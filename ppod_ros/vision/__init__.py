@@ -11,7 +11,9 @@ Modules, in the order a frame meets them:
 - :mod:`~ppod_ros.vision.detection`: blobs and their moments in the plate frame.
 - :mod:`~ppod_ros.vision.shapes`: :class:`PartSpec` and the pose of a blob.
 - :mod:`~ppod_ros.vision.kalman`: the constant-velocity pose filter.
-- :mod:`~ppod_ros.vision.tracker`: :class:`PartTracker` and :class:`TrackResult`.
+- :mod:`~ppod_ros.vision.tracker`: :class:`PartTracker`; its results in
+  :mod:`~ppod_ros.vision.track_result`, its settings and part lists in
+  :mod:`~ppod_ros.vision.tracker_config`.
 """
 
 from ppod_ros.vision.calibration import (
@@ -38,16 +40,9 @@ from ppod_ros.vision.sources import (
     open_source,
     save_npz_recording,
 )
-from ppod_ros.vision.tracker import (
-    PartTracker,
-    TrackedPart,
-    TrackerSettings,
-    TrackResult,
-    TrackStatus,
-    UnexplainedBlob,
-    load_part_specs,
-    load_tracker_config,
-)
+from ppod_ros.vision.track_result import TrackedPart, TrackResult, TrackStatus, UnexplainedBlob
+from ppod_ros.vision.tracker import PartTracker
+from ppod_ros.vision.tracker_config import TrackerSettings, load_part_specs, load_tracker_config
 
 __all__ = [
     "BadFrameError",

@@ -10,15 +10,15 @@
 Each frame: blobs are detected and measured in the plate frame (:mod:`~ppod_ros.vision.detection`),
 each blob is matched to a part type by area and shape and its pose fitted
 (:mod:`~ppod_ros.vision.shapes`); blobs that fit no part type are explained, not guessed: a blob
-that touches the work area's edge is ``edge``, one within two pixels of another blob is
+that touches the work area's edge is ``edge``, one within about four pixels of another blob is
 ``touching`` (their edges mix), one larger than any part is ``merged`` (parts touching, seen as
 one blob), one smaller or misshapen is ``occluded``. Tracks are predicted to the frame time by a
 constant-velocity filter (:mod:`~ppod_ros.vision.kalman`) and matched to fitted blobs of their own
 label by the Hungarian method on distance, within a gate that grows with the track's uncertainty.
 
 Status (same numbers as ppod_msgs/PartPose): TRACKED = measured in this frame; PREDICTED = not
-measured (``reason`` says why: merged, touching, occluded, edge, out_of_view, missed), pose from the filter
-(a part in contact with another is held still: parts cannot pass through each other);
+measured (``reason`` says why: merged, touching, occluded, edge, out_of_view, missed), pose from
+the filter (a part in contact with another is held still: parts cannot pass through each other);
 LOST = not measured for longer than ``max_coast_s``: the pose is the last measured one. A lost
 part that reappears within ``reacquire_radius_m`` of where it was lost, with no other lost part of
 its type as close, gets its id back (``reacquired``); otherwise a new id. Dropped frames only
@@ -29,192 +29,24 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
-from enum import IntEnum
-from pathlib import Path
-from typing import Any
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ppod_ros.config.fields import Fields, load_yaml_file
 from ppod_ros.errors import ConfigError
 from ppod_ros.vision.calibration import calibrate_plate_from_markers
 from ppod_ros.vision.camera import CameraConfig
-from ppod_ros.vision.detection import Blob, BlobDetector, DetectorSettings
+from ppod_ros.vision.detection import Blob, BlobDetector
 from ppod_ros.vision.frames import BadFrameError, check_frame, check_stamp, to_gray
 from ppod_ros.vision.geometry import PlateCalibration
-from ppod_ros.vision.kalman import FilterSettings, PoseFilter
+from ppod_ros.vision.kalman import PoseFilter
 from ppod_ros.vision.shapes import PartSpec, PoseFit, wrap_angle
+from ppod_ros.vision.track_result import TrackedPart, TrackResult, TrackStatus, UnexplainedBlob
+from ppod_ros.vision.tracker_config import TrackerSettings, load_part_specs, load_tracker_config
 
 _FAR = 1e9
-
-
-class TrackStatus(IntEnum):
-    """Track status; values match ppod_msgs/PartPose STATUS_*."""
-
-    TRACKED = 0
-    PREDICTED = 1
-    LOST = 2
-
-
-@dataclass(frozen=True)
-class TrackerSettings:
-    """Tracking parameters (detection and filter settings nested).
-
-    area_tolerance : a blob matches a part type if its area is within this fraction.
-    shape_tolerance : largest difference of scale-free shape invariants for a match.
-    fit_tolerance : largest relative misfit of the orientation moments for a match.
-    gate_m, gate_sigmas : a track accepts detections within max(gate_m, gate_sigmas * sigma).
-    max_coast_s : a track unmeasured for longer is LOST.
-    forget_after_s : a LOST track is dropped after this long.
-    reacquire_radius_m : how far from where it was lost a part may reappear and keep its id.
-    """
-
-    detector: DetectorSettings = field(default_factory=DetectorSettings)
-    filter: FilterSettings = field(default_factory=FilterSettings)
-    area_tolerance: float = 0.06
-    shape_tolerance: float = 0.03
-    fit_tolerance: float = 0.05
-    gate_m: float = 0.008
-    gate_sigmas: float = 6.0
-    max_coast_s: float = 1.0
-    forget_after_s: float = 300.0
-    reacquire_radius_m: float = 0.03
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any], where: str = "tracker") -> TrackerSettings:
-        """Strict parse; every key optional, e.g. ``{max_coast_s: 2.0, detector: {polarity: dark}}``."""
-        f = Fields(data, where)
-        d = cls()
-        det = f.sub("detector", {})
-        dd = DetectorSettings()
-        detector = DetectorSettings(
-            polarity=det.string("polarity", dd.polarity, choices=("bright", "dark")),
-            threshold_ratio=det.number("threshold_ratio", dd.threshold_ratio, min_value=1.05),
-            min_area_px=det.integer("min_area_px", dd.min_area_px, min_value=1),
-            background_cell_px=det.integer(
-                "background_cell_px", dd.background_cell_px, min_value=1, max_value=64
-            ),
-            max_part_size_m=det.number(
-                "max_part_size_m", dd.max_part_size_m, min_value=0.0, exclusive_min=True, unit="m"
-            ),
-            max_order=det.integer("max_order", dd.max_order, min_value=2, max_value=12),
-            dark_level_dn=det.number("dark_level_dn", dd.dark_level_dn, min_value=0.0),
-            bright_level_dn=det.number("bright_level_dn", dd.bright_level_dn, max_value=255.0),
-        )
-        det.finish()
-        flt = f.sub("filter", {})
-        fd = FilterSettings()
-        filt = FilterSettings(
-            **{
-                k: flt.number(k, getattr(fd, k), min_value=0.0, exclusive_min=True)
-                for k in fd.__dataclass_fields__
-            }
-        )
-        flt.finish()
-        kw = {
-            k: f.number(k, getattr(d, k), min_value=0.0, exclusive_min=True)
-            for k in (
-                "area_tolerance",
-                "shape_tolerance",
-                "fit_tolerance",
-                "gate_m",
-                "gate_sigmas",
-                "max_coast_s",
-                "forget_after_s",
-                "reacquire_radius_m",
-            )
-        }
-        f.finish()
-        return cls(detector=detector, filter=filt, **kw)
-
-
-@dataclass(frozen=True)
-class TrackedPart:
-    """One track in one frame.
-
-    Attributes
-    ----------
-    id : int
-        Stable track id (>= 1).
-    label : str
-        Part type.
-    status : TrackStatus
-    reason : str
-        Why a track is not TRACKED: ``merged``, ``touching``, ``occluded``, ``edge``, ``out_of_view``
-        or ``missed``
-        ("" when measured).
-    x_m, y_m, theta_rad : float
-        Pose in the plate frame; theta in [-symmetry/2, symmetry/2) (0 when symmetry is 0).
-    covariance : ndarray, shape (3, 3)
-        Covariance of (x, y, theta) (m^2, m rad, rad^2); theta's variance is inf for disks.
-    vx_mps, vy_mps, omega_radps : float
-        Filtered velocity in the plate frame.
-    symmetry_rad : float
-        theta is known modulo this (2 pi: fully; 0: not at all).
-    last_measured_s : float
-        Stamp of the last frame that measured this part.
-    reacquired : bool
-        True in the frame where a lost part got its id back.
-    """
-
-    id: int
-    label: str
-    status: TrackStatus
-    reason: str
-    x_m: float
-    y_m: float
-    theta_rad: float
-    covariance: np.ndarray
-    vx_mps: float
-    vy_mps: float
-    omega_radps: float
-    symmetry_rad: float
-    last_measured_s: float
-    reacquired: bool = False
-
-    @property
-    def pose(self) -> np.ndarray:
-        """(x_m, y_m, theta_rad), shape (3,)."""
-        return np.array([self.x_m, self.y_m, self.theta_rad])
-
-    @property
-    def velocity(self) -> np.ndarray:
-        """(vx_mps, vy_mps, omega_radps), shape (3,)."""
-        return np.array([self.vx_mps, self.vy_mps, self.omega_radps])
-
-
-@dataclass(frozen=True)
-class UnexplainedBlob:
-    """A blob that is not a measurement of one part: ``kind`` is merged, touching, occluded or edge."""
-
-    kind: str
-    x_m: float
-    y_m: float
-    area_m2: float
-
-
-@dataclass(frozen=True)
-class TrackResult:
-    """Everything the tracker knows after one frame."""
-
-    stamp_s: float
-    frame_index: int
-    parts: tuple[TrackedPart, ...]
-    unexplained: tuple[UnexplainedBlob, ...]
-    new_ids: tuple[int, ...]
-    lost_ids: tuple[int, ...]
-    reacquired_ids: tuple[int, ...]
-    forgotten_ids: tuple[int, ...]
-    processing_s: float
-
-    def by_id(self, track_id: int) -> TrackedPart | None:
-        return next((p for p in self.parts if p.id == track_id), None)
-
-    def with_status(self, status: TrackStatus) -> tuple[TrackedPart, ...]:
-        return tuple(p for p in self.parts if p.status == status)
 
 
 @dataclass
@@ -554,35 +386,6 @@ class PartTracker:
     @property
     def detector(self) -> BlobDetector | None:
         return self._detector
-
-
-def load_part_specs(items: Sequence[Mapping[str, Any]], where: str = "parts") -> list[PartSpec]:
-    """Part types from a list of ``{label, footprint | part, height_m}`` mappings."""
-    if not isinstance(items, Sequence) or isinstance(items, (str, bytes)):
-        raise ConfigError(f"{where}: expected a list of part types")
-    return [PartSpec.from_dict(item, f"{where}[{i}]") for i, item in enumerate(items)]
-
-
-def load_tracker_config(source: str | Path | Mapping[str, Any]) -> tuple[list[PartSpec], TrackerSettings]:
-    """Part types and settings from a tracker YAML file (or its parsed mapping)::
-
-    parts:
-      - {label: washer, footprint: {disk: 0.006}, height_m: 0.002}
-      - {label: bracket, part: {type: rigid, ...}, height_m: 0.004}   # a PART.yaml mapping
-    settings: {max_coast_s: 2.0, detector: {polarity: dark}}          # optional
-    """
-    if isinstance(source, Mapping):
-        data, origin = source, "tracker"
-    else:
-        data, origin = load_yaml_file(source, "tracker"), str(source)
-    try:
-        f = Fields(data, "")
-        specs = load_part_specs(f.raw("parts"), "parts")
-        settings = TrackerSettings.from_dict(f.raw("settings", {}) or {}, "settings")
-        f.finish()
-    except ConfigError as exc:
-        raise ConfigError(f"{origin}: {exc}") from exc
-    return specs, settings
 
 
 __all__ = [

@@ -195,11 +195,11 @@ class BlobDetector:
             raise BadFrameError(
                 f"frame is dark: plate level {level:.1f} DN (< {s.dark_level_dn} DN); lamp off or "
                 f"lens covered?",
-                "dark",
+                "exposure",
             )
         if level > s.bright_level_dn:
             raise BadFrameError(
-                f"frame is overexposed: plate level {level:.1f} DN (> {s.bright_level_dn} DN)", "dark"
+                f"frame is overexposed: plate level {level:.1f} DN (> {s.bright_level_dn} DN)", "exposure"
             )
         small[~self._small_work] = level
         op = cv2.MORPH_OPEN if s.polarity == "bright" else cv2.MORPH_CLOSE

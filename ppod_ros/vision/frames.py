@@ -23,7 +23,7 @@ class BadFrameError(ConfigError):
     """A camera frame was rejected; ``reason`` is a short machine-readable tag.
 
     Reasons: ``"empty"``, ``"not_array"``, ``"dtype"``, ``"size"``, ``"encoding"``,
-    ``"stamp"`` (non-finite or not after the previous frame), ``"dark"`` (the plate is too dark
+    ``"stamp"`` (non-finite or not after the previous frame), ``"exposure"`` (the plate is too dark
     or overexposed: lamp off, lens covered, wrong exposure), ``"noise"`` (no parts, only noise).
     """
 

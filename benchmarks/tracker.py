@@ -8,6 +8,7 @@ camera mount) tracks it. Printed per sequence:
 
   tracked %      part-frames reported TRACKED (the rest: PREDICTED with a reason, e.g. touching)
   pos RMS/max    position error of TRACKED reports (mm)
+  pred RMS       position error of PREDICTED reports (mm; nan when there were none)
   theta RMS/max  orientation error modulo each part's symmetry (deg; disks excluded)
   id swaps       times a part's matched track id changed; id-less frames are not swaps
   ms/frame       PartTracker.update on one core (cv2.setNumThreads(1), CPU affinity 1): wall time,
@@ -199,6 +200,7 @@ def _print_table(rows: list[dict], one_core: bool) -> None:
         ("pos_max_mm", 8, ".4f", "posMAXmm"),
         ("theta_rms_deg", 8, ".3f", "thRMSdeg"),
         ("theta_max_deg", 8, ".3f", "thMAXdeg"),
+        ("predicted_rms_mm", 9, ".3f", "predRMSmm"),
         ("id_swaps", 8, "d", "id swaps"),
         ("tracks_created", 6, "d", "tracks"),
         ("ms_median", 8, ".2f", "wall ms"),

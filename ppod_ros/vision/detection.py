@@ -36,7 +36,8 @@ _K3 = np.ones((3, 3), np.uint8)
 _K5 = np.ones((5, 5), np.uint8)
 #: Reach of the ring of plate pixels that gives each blob its local plate brightness (4 px: the
 #: ring is the two pixels just outside a blob's support).
-_K_RING = np.ones((9, 9), np.uint8)
+_RING_REACH = 4
+_K_RING = np.ones((2 * _RING_REACH + 1, 2 * _RING_REACH + 1), np.uint8)
 
 
 @dataclass(frozen=True)
@@ -142,7 +143,7 @@ class BlobDetector:
         band = work.astype(bool) & ~cv2.erode(
             work, _K3, borderType=cv2.BORDER_CONSTANT, borderValue=0
         ).astype(bool)
-        self._band_idx = np.flatnonzero(band)
+        self._band_rc = np.nonzero(band)  # rows, cols of the work area's boundary pixels
         # The background is estimated on a copy reduced by 2^levels per axis (Gaussian pyramid).
         self._pyr_levels = max(0, int(round(np.log2(max(1, self.settings.background_cell_px)))))
         cell = 2**self._pyr_levels
@@ -168,23 +169,36 @@ class BlobDetector:
         s = self.settings
         u0, v0, u1, v1 = self._crop
         crop = np.ascontiguousarray(gray[v0:v1, u0:u1])
-        background = self._background(crop)
+        small = self._background(crop)
         bright = s.polarity == "bright"
-        thr = cv2.convertScaleAbs(background, alpha=s.threshold_ratio if bright else 1.0 / s.threshold_ratio)
-        fg = cv2.compare(crop, thr, cv2.CMP_GT if bright else cv2.CMP_LT)
-        fg = cv2.bitwise_and(fg, self._work)
-        # Component statistics come from the sorted pixel lists below: cheaper than OpenCV's.
-        # 16-bit labels: OpenCV's morphology below works on them directly.
-        n, labels = cv2.connectedComponents(fg, connectivity=8, ltype=cv2.CV_16U)
+        # The threshold is formed on the reduced background and enlarged as 8-bit: cheaper than
+        # enlarging the background itself, and the blobs' own plate level comes from their rings.
+        thr_small = cv2.convertScaleAbs(small, alpha=s.threshold_ratio if bright else 1.0 / s.threshold_ratio)
+        thr = cv2.resize(thr_small, (crop.shape[1], crop.shape[0]), interpolation=cv2.INTER_LINEAR)
+        fg = cv2.bitwise_and(cv2.compare(crop, thr, cv2.CMP_GT if bright else cv2.CMP_LT), self._work)
+        # Everything after the threshold runs on the window around the foreground, with room for
+        # the rings: few parts cost little.
+        bx, by, bw, bh = cv2.boundingRect(fg)
+        if bw == 0:
+            return []
+        m = _RING_REACH + 1
+        r0, c0 = max(by - m, 0), max(bx - m, 0)
+        r1, c1 = min(by + bh + m, crop.shape[0]), min(bx + bw + m, crop.shape[1])
+        win = (slice(r0, r1), slice(c0, c1))
+        fg_w = np.ascontiguousarray(fg[win])
+        # 16-bit labels: OpenCV's morphology below works on them directly. Component statistics
+        # come from the sorted pixel lists: cheaper than OpenCV's.
+        n, labels = cv2.connectedComponents(fg_w, connectivity=8, ltype=cv2.CV_16U)
         if n > 65000:
             raise BadFrameError(
                 f"frame has {n} foreground regions: noise, not parts (threshold too low?)", "noise"
             )
         if n <= 1:
             return []
-        return self._measure_all(crop, background, fg, labels, n)
+        return self._measure_all(np.ascontiguousarray(crop[win]), small, fg_w, labels, n, (r0, c0))
 
     def _background(self, crop: np.ndarray) -> np.ndarray:
+        """The plate's brightness on the reduced grid (1 / 2^levels), parts removed."""
         s = self.settings
         small = crop
         for _ in range(self._pyr_levels):
@@ -193,8 +207,8 @@ class BlobDetector:
         level = float(np.median(small[self._small_work]))
         if level < s.dark_level_dn:
             raise BadFrameError(
-                f"frame is dark: plate level {level:.1f} DN (< {s.dark_level_dn} DN); lamp off or "
-                f"lens covered?",
+                f"frame is dark: plate level {level:.1f} DN (< {s.dark_level_dn} DN); lamp off or lens "
+                "covered?",
                 "exposure",
             )
         if level > s.bright_level_dn:
@@ -204,19 +218,31 @@ class BlobDetector:
         small[~self._small_work] = level
         op = cv2.MORPH_OPEN if s.polarity == "bright" else cv2.MORPH_CLOSE
         small = cv2.morphologyEx(small, op, self._open_kernel, borderType=cv2.BORDER_REPLICATE)
-        small = cv2.GaussianBlur(small, (0, 0), 1.0, borderType=cv2.BORDER_REPLICATE)
-        return cv2.resize(small, (crop.shape[1], crop.shape[0]), interpolation=cv2.INTER_LINEAR)
+        return cv2.GaussianBlur(small, (0, 0), 1.0, borderType=cv2.BORDER_REPLICATE)
+
+    def _sample_background(self, small: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Bilinear samples of the reduced background at crop pixels (rows, cols)."""
+        cell = float(2**self._pyr_levels)
+        fy = np.clip(rows / cell, 0, small.shape[0] - 1.001)
+        fx = np.clip(cols / cell, 0, small.shape[1] - 1.001)
+        iy, ix = fy.astype(np.int64), fx.astype(np.int64)
+        wy, wx = fy - iy, fx - ix
+        top = small[iy, ix] * (1 - wx) + small[iy, ix + 1] * wx
+        bottom = small[iy + 1, ix] * (1 - wx) + small[iy + 1, ix + 1] * wx
+        return (top * (1 - wy) + bottom * wy).astype(np.float32)
 
     def _local_background(
         self,
         crop: np.ndarray,
         fg: np.ndarray,
         support: np.ndarray,
-        labels16: np.ndarray,
+        work: np.ndarray,
+        labels: np.ndarray,
         ids: np.ndarray,
         n: int,
     ) -> tuple[np.ndarray, np.ndarray] | None:
-        """Per blob, a plane I = a + b u + c v fitted to the plate pixels 3 to 4 pixels around it.
+        """Per blob, a plane I = a + b u + c v (window pixel coordinates) fitted to the plate
+        pixels 3 to 4 pixels around it.
 
         The global background is an opening, which is biased near parts on a lighting gradient
         (a part hides the plate's darkest pixels from it); the ring around each blob sees the
@@ -224,13 +250,13 @@ class BlobDetector:
         or None when no blob has a ring.
         """
         # Masks are 0/1: the saturating subtraction removes the support from the reach.
-        ring = cv2.subtract(cv2.bitwise_and(cv2.dilate(fg, _K_RING), self._work), support)
+        ring = cv2.subtract(cv2.bitwise_and(cv2.dilate(fg, _K_RING), work), support)
         ridx = np.flatnonzero(ring.view(bool))
         if ridx.size == 0:
             return None
         # Ring pixels belong to the blob with the largest label within reach: any plate pixel
         # near a blob serves its fit, so sharing needs no tie-break.
-        rlab = cv2.dilate(labels16, _K_RING).ravel()[ridx]
+        rlab = cv2.dilate(labels, _K_RING).ravel()[ridx]
         width = crop.shape[1]
         u = (ridx % width).astype(np.float64)
         v = (ridx // width).astype(np.float64)
@@ -253,18 +279,27 @@ class BlobDetector:
         return coef.astype(np.float32), ok
 
     def _measure_all(
-        self, crop: np.ndarray, background: np.ndarray, fg: np.ndarray, labels: np.ndarray, n: int
+        self,
+        crop: np.ndarray,
+        small: np.ndarray,
+        fg: np.ndarray,
+        labels: np.ndarray,
+        n: int,
+        origin: tuple[int, int],
     ) -> list[Blob]:
+        """Measure every blob of a window of the crop whose top-left crop pixel is ``origin``."""
         s = self.settings
-        width = crop.shape[1]
+        r0, c0 = origin
+        height, width = crop.shape
+        win = (slice(r0, r0 + height), slice(c0, c0 + width))
+        work = np.ascontiguousarray(self._work[win])
         # Support: foreground plus two pixels around it, where anti-aliased and blurred edges
         # fall. A pixel within two pixels of two blobs would mix both parts: it belongs to neither.
-        lab16 = labels
-        near_max = cv2.dilate(lab16, _K5)
-        inv = np.zeros_like(lab16)
-        cv2.subtract((float(n + 1), 0.0, 0.0, 0.0), lab16, dst=inv, mask=fg)
+        near_max = cv2.dilate(labels, _K5)
+        inv = np.zeros_like(labels)
+        cv2.subtract((float(n + 1), 0.0, 0.0, 0.0), labels, dst=inv, mask=fg)
         near_inv = cv2.dilate(inv, _K5)  # n + 1 - (smallest label nearby), 0 if none
-        support = cv2.bitwise_and(cv2.dilate(fg, _K5), self._work)
+        support = cv2.bitwise_and(cv2.dilate(fg, _K5), work)
         idx = np.flatnonzero(support.view(bool))
         lab = labels.ravel()[idx].astype(np.int32)
         own = lab > 0
@@ -285,15 +320,19 @@ class BlobDetector:
         ids = lab[starts]
         area_px = np.add.reduceat(own.astype(np.int64), starts)
         counts = np.diff(np.r_[starts, idx.size])
-        local = self._local_background(crop, fg, support, lab16, ids, n)
-        plate_level = background.ravel()[idx]
+        rows, cols = idx // width, idx % width
+        # Each blob's own plane of plate brightness where its ring allowed one, else the global one.
+        plate_level = None
+        local = self._local_background(crop, fg, support, work, labels, ids, n)
         if local is not None:
-            # Each blob's own plane of plate brightness, where its ring of plate pixels allowed one.
             coef, ok = local
-            uu, vv = (idx % width).astype(np.float32), (idx // width).astype(np.float32)
             c = np.repeat(coef, counts, axis=0)
-            planar = c[:, 0] + c[:, 1] * uu + c[:, 2] * vv
-            plate_level = np.where(np.repeat(ok, counts), planar, plate_level)
+            plate_level = c[:, 0] + c[:, 1] * cols.astype(np.float32) + c[:, 2] * rows.astype(np.float32)
+            if not ok.all():
+                fallback = self._sample_background(small, rows + r0, cols + c0)
+                plate_level = np.where(np.repeat(ok, counts), plate_level, fallback)
+        if plate_level is None:
+            plate_level = self._sample_background(small, rows + r0, cols + c0)
         ratio = crop.ravel()[idx].astype(np.float32) / plate_level
         # kappa, the part-to-plate brightness ratio, on each blob's interior (2 px inside its
         # edge); thin blobs without an interior use their most extreme pixel.
@@ -305,33 +344,35 @@ class BlobDetector:
             extreme = (np.maximum if s.polarity == "bright" else np.minimum).reduceat(ratio, starts)
             kappa = np.where(thin, extreme, kappa)
         denom = np.where(np.abs(kappa - 1.0) > 0.05, kappa - 1.0, np.inf)
-        mass = (ratio - 1.0) * self._dA.ravel()[idx] / np.repeat(denom, counts)
-        mass = mass.astype(np.float64)
-        x = self._x.ravel()[idx].astype(np.float64)
-        y = self._y.ravel()[idx].astype(np.float64)
+        # Plate coordinates and areas come from the calibration's maps of the whole crop.
+        cidx = (rows + r0) * self._x.shape[1] + (cols + c0)
+        mass = ((ratio - 1.0) * self._dA.ravel()[cidx] / np.repeat(denom, counts)).astype(np.float64)
+        x = self._x.ravel()[cidx].astype(np.float64)
+        y = self._y.ravel()[cidx].astype(np.float64)
         m0 = np.add.reduceat(mass, starts)
         safe = np.where(m0 > 0, m0, 1.0)
         cx = np.add.reduceat(mass * x, starts) / safe
         cy = np.add.reduceat(mass * y, starts) / safe
         z = (x - np.repeat(cx, counts)) + 1j * (y - np.repeat(cy, counts))
-        orders = self.orders
         moments = np.zeros((ids.size, s.max_order + 1), dtype=complex)
         moments[:, 0] = m0
         zn, power = np.ones_like(z), 0
-        for order in orders:
-            while power < order:
+        for n_order in self.orders:
+            while power < n_order:
                 zn *= z
                 power += 1
-            moments[:, order] = np.add.reduceat(mass * zn, starts)
+            moments[:, n_order] = np.add.reduceat(mass * zn, starts)
         r2 = z.real**2 + z.imag**2
         radial2 = np.add.reduceat(mass * r2, starts)
         extent = np.sqrt(np.maximum.reduceat(np.where(own, r2, 0.0), starts))
         edge = np.zeros(n, bool)
-        edge[labels.ravel()[self._band_idx]] = True
-        uu, vv = idx % width, idx // width
-        u_lo, u_hi = np.minimum.reduceat(uu, starts), np.maximum.reduceat(uu, starts)
-        v_lo, v_hi = np.minimum.reduceat(vv, starts), np.maximum.reduceat(vv, starts)
-        u0, v0 = self._crop[:2]
+        br, bc = self._band_rc[0] - r0, self._band_rc[1] - c0
+        inside = (br >= 0) & (br < height) & (bc >= 0) & (bc < width)
+        edge[labels[br[inside], bc[inside]]] = True
+        u_lo, u_hi = np.minimum.reduceat(cols, starts), np.maximum.reduceat(cols, starts)
+        v_lo, v_hi = np.minimum.reduceat(rows, starts), np.maximum.reduceat(rows, starts)
+        # Window pixels to image pixels.
+        du, dv = self._crop[0] + c0, self._crop[1] + r0
         blobs = []
         for j in np.flatnonzero((area_px >= s.min_area_px) & (m0 > 0) & np.isfinite(denom)):
             blobs.append(
@@ -342,7 +383,7 @@ class BlobDetector:
                     float(radial2[j]),
                     float(extent[j]),
                     int(area_px[j]),
-                    (int(u_lo[j]) + u0, int(v_lo[j]) + v0, int(u_hi[j]) + u0 + 1, int(v_hi[j]) + v0 + 1),
+                    (int(u_lo[j]) + du, int(v_lo[j]) + dv, int(u_hi[j]) + du + 1, int(v_hi[j]) + dv + 1),
                     bool(edge[ids[j]]),
                     bool(crowded[ids[j]]),
                     float(kappa[j]),

@@ -132,8 +132,24 @@ class PartSpec:
 
     def area_ratio(self, blob: Blob, calibration: PlateCalibration) -> float:
         """Blob area, moved to this part's top-face plane, over the part's area (cheap pre-check)."""
-        hs = calibration.height_scale(self.height_m)
-        return blob.area_m2 * hs * hs / self._ref["area"]
+        return blob.area_m2 * self._view(calibration)[3][0] / self._ref["area"]
+
+    def _view(self, calibration: PlateCalibration) -> tuple:
+        """(calibration, camera foot point x, y, [hs^(n + 2)]) for this part's top-face height,
+        kept for the last calibration used: a tracker fits every frame with the same one."""
+        view = self._ref.get("view")
+        if view is None or view[0] is not calibration:
+            hs = calibration.height_scale(self.height_m)
+            foot = calibration.camera_centre_m
+            view = (
+                calibration,
+                float(foot[0]),
+                float(foot[1]),
+                [hs ** (n + 2) for n in range(MAX_ORDER + 7)],
+                hs,
+            )
+            self._ref["view"] = view
+        return view
 
     def fit(self, blob: Blob, calibration: PlateCalibration, shape_limit: float = math.inf) -> PoseFit:
         """Pose of this part type that best explains ``blob`` (measured on z = 0).
@@ -142,17 +158,18 @@ class PartSpec:
         result then has theta NaN and an infinite moment residual (a cheap rejection).
         """
         ref = self._ref
-        hs = calibration.height_scale(self.height_m)
-        cx, cy = calibration.lift(blob.centroid_m, self.height_m)
+        _, fx, fy, scale, hs = self._view(calibration)
+        # A top face at height h is seen scaled by hs about the camera's foot point: the centroid
+        # moves towards it and a moment of order n scales by hs^(n + 2).
+        bx, by = blob.centroid_m.tolist()
+        cx, cy = fx + (bx - fx) * hs, fy + (by - fy) * hs
         raw = blob.moments.tolist()
         used = [n for n in ref["orders"] if n < len(raw)]
-        # A top face at height h is seen scaled by hs about the camera's foot point: a moment
-        # of order n scales by hs^(n + 2).
-        M = {n: raw[n] * hs ** (n + 2) for n in used}
-        area = blob.area_m2 * hs * hs
+        M = {n: raw[n] * scale[n] for n in used}
+        area = blob.area_m2 * scale[0]
         shape = max(
             abs(abs(M[2]) / area**2 - ref["signature"][0]),
-            abs(blob.radial2 * hs**4 / area**2 - ref["signature"][1]),
+            abs(blob.radial2 * scale[2] / area**2 - ref["signature"][1]),
         )
         if shape > shape_limit:
             return PoseFit(math.nan, math.nan, math.nan, area / ref["area"], math.inf, float(shape))

@@ -201,6 +201,14 @@ class PartTracker:
         # Blobs are measured on the plate surface, where a raised top face looks larger.
         biggest = max(p.area_m2 / cal.height_scale(p.height_m) ** 2 for p in self.specs)
         for blob in blobs:
+            # A blob cut by the work area's edge or mixed with a neighbour's edge is no
+            # measurement of one part, whatever its shape.
+            if blob.at_edge:
+                unexplained.append(("edge", blob))
+                continue
+            if blob.crowded:
+                unexplained.append(("touching", blob))
+                continue
             best, best_score = None, math.inf
             for spec in self.specs:
                 if abs(spec.area_ratio(blob, cal) - 1) > s.area_tolerance:
@@ -216,11 +224,7 @@ class PartTracker:
                     )
                     if score < best_score:
                         best, best_score = _Measurement(spec, fit, blob), score
-            if blob.at_edge:
-                unexplained.append(("edge", blob))
-            elif blob.crowded:
-                unexplained.append(("touching", blob))
-            elif best is not None:
+            if best is not None:
                 measurements.append(best)
             elif blob.area_m2 > (1 + s.area_tolerance) * biggest:
                 unexplained.append(("merged", blob))

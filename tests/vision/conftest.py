@@ -1,0 +1,38 @@
+"""Shared fixtures for the vision tests: the default camera, its exact calibration, a renderer.
+
+The calibration is session-scoped so that its per-pixel plate map is computed once for all the
+trackers the tests build (they receive it instead of calibrating from markers, except where the
+calibration itself is under test).
+"""
+
+import cv2
+import pytest
+from ppod_sim.camera import CameraRenderer
+
+from ppod_ros.vision import CameraConfig, PlateCalibration
+
+# Tests run on 2 shared cores: keep OpenCV from spawning its own thread pool.
+cv2.setNumThreads(1)
+
+
+@pytest.fixture(scope="session")
+def camera() -> CameraConfig:
+    return CameraConfig()
+
+
+@pytest.fixture(scope="session")
+def nominal_camera(camera) -> CameraConfig:
+    """What a lab file would state before calibration: centred, looking straight down."""
+    return camera.with_changes(position_m=(0.0, 0.0, 0.70), rotation_deg=(0.0, 0.0, 0.0))
+
+
+@pytest.fixture(scope="session")
+def calibration(camera) -> PlateCalibration:
+    cal = PlateCalibration.nominal(camera)
+    cal.pixel_map(cal.window_of_region(camera.plate.work_area_m[:2], camera.plate.work_area_m[2:]))
+    return cal
+
+
+@pytest.fixture
+def renderer(camera) -> CameraRenderer:
+    return CameraRenderer(camera, seed=7)

@@ -103,12 +103,12 @@ class SequenceScore:
 def run_sequence(n_parts: int, frames: int, seed: int) -> SequenceScore:
     """Render and track one sequence; returns its score."""
     import cv2
-    from ppod_sim.camera import CameraRenderer, TriggeredCamera
-    from ppod_sim.camera.scenarios import make_scene
     from scipy.optimize import linear_sum_assignment
 
     from ppod_ros.motion import PlateMotion
     from ppod_ros.vision import CameraConfig, PartTracker, TrackStatus, wrap_angle
+    from ppod_sim.camera import CameraRenderer, TriggeredCamera
+    from ppod_sim.camera.scenarios import make_scene
 
     cv2.setNumThreads(1)
     true_camera = CameraConfig()

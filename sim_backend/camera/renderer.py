@@ -18,6 +18,11 @@ from collections.abc import Sequence
 
 import cv2
 import numpy as np
+
+from ppod_ros.config.fields import check_array
+from ppod_ros.errors import ConfigError
+from ppod_ros.vision.calibration import Checkerboard, marker_dictionary
+from ppod_ros.vision.camera import CameraConfig
 from ppod_sim.camera.raster import coverage, densify, downsample, fill_polygons, window_of
 from ppod_sim.camera.scene import (
     Lighting,
@@ -29,11 +34,6 @@ from ppod_sim.camera.scene import (
     SceneStyle,
     SensorModel,
 )
-
-from ppod_ros.config.fields import check_array
-from ppod_ros.errors import ConfigError
-from ppod_ros.vision.calibration import Checkerboard, marker_dictionary
-from ppod_ros.vision.camera import CameraConfig
 
 #: Edge length (m) below which projected edges are treated as straight (about 1/3 pixel).
 _EDGE_STEP_M = 0.00015

@@ -13,11 +13,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from ppod_sim.camera.scene import RenderPart
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.parts import Footprint
 from ppod_ros.vision.shapes import PartSpec
+from ppod_sim.camera.scene import RenderPart
 
 #: Standard part types: a pin, a trapezoid tab (no symmetry), a washer, a square tile, a hexagon.
 STANDARD_PARTS: tuple[PartSpec, ...] = (

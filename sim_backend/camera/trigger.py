@@ -13,11 +13,11 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from ppod_sim.camera.renderer import CameraRenderer
-from ppod_sim.camera.scene import RenderedFrame, RenderPart
 
 from ppod_ros.config.fields import check_number
 from ppod_ros.motion import PlateMotion
+from ppod_sim.camera.renderer import CameraRenderer
+from ppod_sim.camera.scene import RenderedFrame, RenderPart
 
 #: Ticks within this fraction of a cycle after a boundary still trigger at that boundary
 #: (floating-point noise in tick arithmetic must not skip a whole cycle).

@@ -7,9 +7,9 @@ calibration itself is under test).
 
 import cv2
 import pytest
-from ppod_sim.camera import CameraRenderer
 
 from ppod_ros.vision import CameraConfig, PlateCalibration
+from ppod_sim.camera import CameraRenderer
 
 # Tests run on 2 shared cores: keep OpenCV from spawning its own thread pool.
 cv2.setNumThreads(1)

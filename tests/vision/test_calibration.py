@@ -9,7 +9,6 @@ import math
 
 import numpy as np
 import pytest
-from ppod_sim.camera import CameraRenderer, Occluder, board_pose_flat, tilted_board_pose
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.vision import (
@@ -21,6 +20,7 @@ from ppod_ros.vision import (
     calibrate_plate_from_markers,
     detect_markers,
 )
+from ppod_sim.camera import CameraRenderer, Occluder, board_pose_flat, tilted_board_pose
 
 
 def work_area_grid(camera, n=9):

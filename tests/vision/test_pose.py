@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from ppod_sim.camera import RenderPart
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.parts import Footprint, PointPart, published_rigid_part
 from ppod_ros.vision import BlobDetector, PartSpec, wrap_angle
 from ppod_ros.vision.shapes import _polygon_moments
+from ppod_sim.camera import RenderPart
 
 SPECS = [
     PartSpec("washer", Footprint.from_value({"disk": 0.006}), 0.002),

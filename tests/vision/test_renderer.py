@@ -2,6 +2,11 @@ import math
 
 import numpy as np
 import pytest
+
+from ppod_ros.errors import ConfigError
+from ppod_ros.motion import PlateMotion
+from ppod_ros.parts import Footprint, published_rigid_part
+from ppod_ros.vision import BlobDetector
 from ppod_sim.camera import (
     CameraRenderer,
     Lighting,
@@ -11,11 +16,6 @@ from ppod_sim.camera import (
     frame_times_s,
     trigger_time_s,
 )
-
-from ppod_ros.errors import ConfigError
-from ppod_ros.motion import PlateMotion
-from ppod_ros.parts import Footprint, published_rigid_part
-from ppod_ros.vision import BlobDetector
 
 CLEAN = SensorModel(blur_sigma_px=0.0, read_noise_dn=0.0, shot_noise_dn2_per_dn=0.0)
 FLAT = Lighting(gradient_u=0.0, gradient_v=0.0, vignetting=0.0)

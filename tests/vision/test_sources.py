@@ -3,8 +3,6 @@
 import cv2
 import numpy as np
 import pytest
-from ppod_sim.camera import RenderPart
-from ppod_sim.camera.scenarios import STANDARD_PARTS
 
 from ppod_ros.errors import ConfigError, DeviceError
 from ppod_ros.vision import (
@@ -17,6 +15,8 @@ from ppod_ros.vision import (
     save_npz_recording,
 )
 from ppod_ros.vision.sources import convert_encoding
+from ppod_sim.camera import RenderPart
+from ppod_sim.camera.scenarios import STANDARD_PARTS
 
 
 def small_frames(n=4, shape=(48, 64)):

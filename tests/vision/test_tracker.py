@@ -8,7 +8,6 @@ import math
 
 import numpy as np
 import pytest
-from ppod_sim.camera import CameraRenderer, Lighting, Occluder, RenderPart, SceneStyle
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.parts import Footprint
@@ -22,6 +21,7 @@ from ppod_ros.vision import (
     load_tracker_config,
     wrap_angle,
 )
+from ppod_sim.camera import CameraRenderer, Lighting, Occluder, RenderPart, SceneStyle
 
 PIN = PartSpec("pin", Footprint.from_value({"rect": [0.008, 0.024]}), 0.004)
 WASHER = PartSpec("washer", Footprint.from_value({"disk": 0.006}), 0.002)

@@ -1,0 +1,1 @@
+"""Actuation: the nominal plant model, harmonic tables, goal planning and limits (ROS-free)."""

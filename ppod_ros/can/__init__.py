@@ -1,0 +1,28 @@
+"""The PPOD CAN protocol (docs/can_protocol.md): frame codec, bus factory, fault injection, host link.
+
+- :mod:`ppod_ros.can.protocol`: identifiers, enumerations, scalings, frame timing and bus load
+- :mod:`ppod_ros.can.codec`: one record per frame type, ``encode``/``decode``, error counting
+- :mod:`ppod_ros.can.bus`: ``open_bus`` chooses the backend by name (virtual, remote, socketcan, ...)
+- :mod:`ppod_ros.can.faults`: ``FaultInjectingBus`` (lost, delayed, corrupted frames, bus-off)
+- :mod:`ppod_ros.can.host`: ``DeviceLink``, the host side used by the waveform generator and scripts
+"""
+
+from ppod_ros.can.bus import open_bus
+from ppod_ros.can.faults import FaultInjectingBus
+from ppod_ros.can.host import AccelSummary, DeviceLink, DeviceSnapshot, RawCapture, send_estop
+from ppod_ros.can.protocol import PROTOCOL_VERSION, AckResult, Command, DeviceState, Fault
+
+__all__ = [
+    "PROTOCOL_VERSION",
+    "AccelSummary",
+    "AckResult",
+    "Command",
+    "DeviceLink",
+    "DeviceSnapshot",
+    "DeviceState",
+    "Fault",
+    "FaultInjectingBus",
+    "RawCapture",
+    "open_bus",
+    "send_estop",
+]

@@ -14,10 +14,11 @@ With ``exact_geometry`` the plant is the exact one to second order in the motion
 directions and rates from the exact kinematics, the rotation of the plate's inertia and centre of
 mass, centripetal and gyroscopic terms. Their difference from the linear model enters as the
 disturbance inputs (generalised force f_d and coil voltage v_d), computed from the chunk's first
-pass and applied in a second pass (a Picard step: the terms are ~1e-3 of the motion, so one step
-leaves ~1e-6). Gravity and the flexure preload balance at home; their geometric-stiffness terms
-(about 1 % of the flexure stiffness, 0.1 % of the response above the suspension modes) are left
-out of both models.
+pass and applied in a second pass (a Picard step: the terms are ~1e-3 of the motion and one step
+leaves a third-order remainder, 3e-5 of the state at LineSinkX amplitude against a Runge-Kutta
+integration of the exact equations, tests/device/test_sim_plant.py). Gravity and the flexure
+preload balance at home; their geometric-stiffness terms (about 1 % of the flexure stiffness,
+0.1 % of the response above the suspension modes) are left out of both models.
 """
 
 from __future__ import annotations

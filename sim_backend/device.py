@@ -89,6 +89,9 @@ class CycleTruth:
     accel_samples : ndarray, shape (N, 6)
         The sampled true plate acceleration.
     current_peak_a, voltage_peak_v, leg_peak_m : ndarray, shape (6,)
+        Peaks over the cycle of the coil currents, amplifier voltages and leg displacements.
+    current_end_a : ndarray, shape (6,)
+        Coil currents at the end of the cycle.
     """
 
     cycle_index: int
@@ -101,6 +104,7 @@ class CycleTruth:
     current_peak_a: np.ndarray
     voltage_peak_v: np.ndarray
     leg_peak_m: np.ndarray
+    current_end_a: np.ndarray
 
     def motion(self) -> PlateMotion:
         """The plate's actual motion over this cycle as a PlateMotion (harmonics 1..H)."""
@@ -421,6 +425,7 @@ class SimDevice:
                 [np.max(np.abs(res.current), 0), np.max(np.abs(res.voltage), 0), np.max(np.abs(res.leg), 0)]
             ),
         )
+        self._current_end = res.current[-1]
         self._update_thermal(res.current, L * self.dt_s)
         self._check_faults(res)
         self.telemetry.pump(L * self.dt_s)
@@ -467,6 +472,7 @@ class SimDevice:
             analyze(truth, H),
             truth,
             *self._cycle_peaks,
+            self._current_end.copy(),
         )
         self.truth.append(record)
         for callback in self.cycle_callbacks:

@@ -266,6 +266,15 @@ class DeviceLink:
         """Send a :class:`~ppod_ros.actuation.planning.GoalPlan`'s table (or a CorrectionResult's)."""
         return self.send_table(plan.currents_a, plan.frequency_hz, plan.ramp_s)
 
+    def send_goal(self, planner, motion):
+        """Validate ``motion`` with ``planner`` (a GoalPlanner) and send it only if it passes every limit.
+
+        Returns ``(seq, plan)``. A goal over a limit raises :class:`~ppod_ros.errors.LimitError` and
+        sends nothing.
+        """
+        plan = planner.plan(motion)
+        return self.send_plan(plan), plan
+
     def stop_motion(self, ramp_s: float | None = None, frequency_hz: float | None = None) -> int:
         """Commit an all-zero table: ramp the plate to rest and stay enabled."""
         ramp = self.config.timing.default_ramp_s if ramp_s is None else ramp_s

@@ -190,7 +190,7 @@ class SimDevice:
         self.steps_per_cycle = self.samples_per_cycle * self.steps_per_sample
         self.steps_per_chunk = self.steps_per_cycle // self.n_chunks
         self.dt_s = period / self.steps_per_cycle
-        self.plant.discretisation(self.dt_s, self.steps_per_cycle)
+        self.plant.discretisation(self.dt_s, self.steps_per_sample, self.samples_per_cycle)
         self.cycle_start_s = self.time_s
         self.cycle_frequency_hz = f
         self.step_in_cycle = 0

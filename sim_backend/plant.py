@@ -7,8 +7,9 @@ device's DAC interpolates), so the *first-order-hold* discretisation
 
     x[n+1] = Phi x[n] + G0 u[n] + G1 u[n+1]
 
-is exact for the linear part. A chunk of L steps is computed at once: the recursion is a parallel
-prefix scan (log2 L matrix products over the whole chunk) plus the free response Phi^n x[0].
+is exact for the linear part. A chunk of L steps is computed at once, on the grid of reported rows
+(every m-th step; the inputs of the m steps in between are aggregated exactly): the recursion is a
+parallel prefix scan (log2(L/m) matrix products over the whole chunk) plus the free response.
 
 With ``exact_geometry`` the plant is the exact one to second order in the motion: leg lengths,
 directions and rates from the exact kinematics, the rotation of the plate's inertia and centre of
@@ -36,15 +37,19 @@ from ppod_ros.motion import GRAVITY_MPS2
 
 @dataclass(frozen=True)
 class Discretisation:
-    """First-order-hold discretisation of the plant for one step ``dt_s`` and chunk length."""
+    """First-order-hold discretisation for control step ``dt_s``, aggregated to a grid of ``every`` steps.
+
+    ``x[(j+1) m] = Phi^m x[j m] + sum_{i=0..m} Gamma_i u[j m + i]`` is exact for references linear
+    between control steps (m = ``every``); ``powers`` holds (Phi^m)^j for j = 0..rows.
+    """
 
     dt_s: float
-    steps: int
-    Phi: np.ndarray  # (24, 24)
-    G0: np.ndarray  # (24, 18)
-    G1: np.ndarray  # (24, 18)
-    powers: np.ndarray  # (steps + 1, 24, 24): Phi^n
-    doubling: tuple[np.ndarray, ...]  # Phi^(2^j)
+    every: int
+    rows: int
+    Phi_m: np.ndarray  # (24, 24)
+    Gamma: np.ndarray  # (every + 1, 24, 18)
+    powers: np.ndarray  # (rows + 1, 24, 24)
+    doubling: tuple[np.ndarray, ...]  # (Phi^m)^(2^l)
 
 
 def foh_discretise(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -68,8 +73,8 @@ class ChunkResult:
     x : (n, 24) state; accel_world : (n, 6) [p'', alpha] in the base frame; accel_plate : (n, 6)
     [p'', alpha] expressed in the plate frame (the ground truth of PHYSICS.md's control vector);
     omega_plate : (n, 3) angular velocity in the plate frame; gravity_plate : (n, 3) the gravity
-    vector in the plate frame; leg : (n, 6) leg displacements (m). At every control step 0..L:
-    voltage : (L+1, 6) amplifier outputs (V); current : (L+1, 6) coil currents (A).
+    vector in the plate frame; leg : (n, 6) leg displacements (m). At the reported rows and the
+    chunk end: voltage : (n+1, 6) amplifier outputs (V); current : (n+1, 6) coil currents (A).
     """
 
     x: np.ndarray
@@ -115,43 +120,56 @@ class PlantSimulator:
         self.x = np.zeros(NX)
         self._u_last = np.zeros(NU)
 
-    def discretisation(self, dt_s: float, steps: int) -> Discretisation:
-        """FOH matrices for step ``dt_s``, with powers for chunks of up to ``steps`` steps (cached)."""
-        d = self._cache.get(float(dt_s))
-        if d is None or d.steps < steps:
+    def discretisation(self, dt_s: float, every: int, rows: int) -> Discretisation:
+        """Grid discretisation for control step ``dt_s`` (cached), with powers for ``rows`` grid rows."""
+        key = (float(dt_s), int(every))
+        d = self._cache.get(key)
+        if d is None or d.rows < rows:
             Phi, G0, G1 = foh_discretise(self.model.A, self.model.B, dt_s)
-            powers = np.empty((steps + 1, NX, NX))
+            m = int(every)
+            P = [np.eye(NX)]
+            for _ in range(m):
+                P.append(P[-1] @ Phi)
+            Gamma = np.zeros((m + 1, NX, NU))
+            for i in range(m + 1):
+                if i <= m - 1:
+                    Gamma[i] += P[m - 1 - i] @ G0
+                if i >= 1:
+                    Gamma[i] += P[m - i] @ G1
+            Phi_m = P[m]
+            powers = np.empty((rows + 1, NX, NX))
             powers[0] = np.eye(NX)
-            for n in range(1, steps + 1):
-                powers[n] = powers[n - 1] @ Phi
-            doubling = []
-            P, span = Phi, 1
-            while span < steps:
-                doubling.append(P)
-                P, span = P @ P, 2 * span
-            d = Discretisation(float(dt_s), int(steps), Phi, G0, G1, powers, tuple(doubling))
+            for n in range(1, rows + 1):
+                powers[n] = powers[n - 1] @ Phi_m
+            doubling, Q, span = [], Phi_m, 1
+            while span < rows:
+                doubling.append(Q)
+                Q, span = Q @ Q, 2 * span
+            d = Discretisation(float(dt_s), m, int(rows), Phi_m, Gamma, powers, tuple(doubling))
             if len(self._cache) > 16:
                 self._cache.clear()
-            self._cache[float(dt_s)] = d
+            self._cache[key] = d
         return d
 
     # ------------------------------------------------------------------ linear pass
     @staticmethod
     def _linear_pass(d: Discretisation, x0: np.ndarray, U: np.ndarray) -> np.ndarray:
-        """States at steps 0..L for inputs U (L+1, 18), by a parallel prefix scan."""
-        W = U[:-1] @ d.G0.T + U[1:] @ d.G1.T  # (L, 24): w_n drives x[n+1]
-        L = W.shape[0]
+        """States at the grid rows 0, m, ..., L for control-step inputs U (L+1, 18), by a prefix scan."""
+        m = d.every
+        J = (U.shape[0] - 1) // m
+        blocks = U[np.arange(J)[:, None] * m + np.arange(m + 1)]  # (J, m+1, 18)
+        W = np.einsum("jik,ilk->jl", blocks, d.Gamma)  # (J, 24): drives grid row j+1
         span = 1
         for P in d.doubling:
-            if span >= L:
+            if span >= J:
                 break
             shifted = W[:-span] @ P.T
             W = W.copy()
             W[span:] += shifted
             span *= 2
-        X = np.empty((U.shape[0], NX))
+        X = np.empty((J + 1, NX))
         X[0] = x0
-        X[1:] = W + d.powers[1 : L + 1] @ x0
+        X[1:] = W + d.powers[1 : J + 1] @ x0
         return X
 
     def _accel(self, X: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -217,25 +235,25 @@ class PlantSimulator:
         L = current_ref.shape[0] - 1
         if L % every:
             raise ValueError(f"every: the chunk's {L} steps must be a multiple of {every}")
-        d = self.discretisation(dt_s, L)
+        J = L // every
+        d = self.discretisation(dt_s, every, J)
         U = np.zeros((L + 1, NU))
         U[:, :6] = current_ref
         U[0, 6:] = self._u_last[6:]
-        X = self._linear_pass(d, self.x, U)
-        qdd = self._accel(X, U)
         grid = np.arange(0, L + 1, every)
+        X = self._linear_pass(d, self.x, U)  # states at the grid rows
+        qdd = self._accel(X, U[grid])
         if self.exact:
-            f_d, v_d = self._disturbance(X[grid], qdd[grid])
+            f_d, v_d = self._disturbance(X, qdd)
             D = np.hstack([f_d, v_d])
             D[0] = self._u_last[6:]  # the chunk start is already simulated: keep its input
-            w = (np.arange(L + 1) % every / every)[:, None]
-            j = np.minimum(np.arange(L + 1) // every, len(grid) - 2)
-            w = np.where(np.arange(L + 1)[:, None] == L, 1.0, w)
+            n = np.arange(L + 1)
+            j = np.minimum(n // every, J - 1)
+            w = ((n - j * every) / every)[:, None]
             U[:, 6:] = (1 - w) * D[j] + w * D[j + 1]
             X = self._linear_pass(d, self.x, U)
-            qdd = self._accel(X, U)
-        rows = grid[:-1]
-        Xs, qs = X[rows], qdd[rows]
+            qdd = self._accel(X, U[grid])
+        Xs, qs = X[:-1], qdd[:-1]
         if self.exact:
             g = self._kinematics(Xs, qs)
             R, omega_w, alpha_w, leg = g["R"], g["omega"], g["alpha"], g["leg"]
@@ -253,7 +271,7 @@ class PlantSimulator:
         omega_plate = np.einsum("nij,nj->ni", Rt, omega_w)
         gravity_plate = Rt[:, :, 2] * -GRAVITY_MPS2
         Cv, Dv = self.model.output_matrices("voltage")
-        voltage = X @ Cv.T + U @ Dv.T
+        voltage = X @ Cv.T + U[grid] @ Dv.T
         return ChunkResult(
             Xs, accel_world, accel_plate, omega_plate, gravity_plate, voltage, leg, X[:, 12:18].copy()
         )

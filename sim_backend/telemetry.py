@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import can
 import numpy as np
 
-from ppod_ros.can.codec import RawData, RawHeader, SummaryData, SummaryHeader
+from ppod_ros.can.codec import RawData, RawHeader, SummaryHeader, encode_summary
 from ppod_ros.can.protocol import MAX_RAW_SAMPLES, MAX_SUMMARY_CYCLES, MAX_TABLE_HARMONIC
 
 
@@ -125,15 +125,9 @@ class Telemetry:
     def _send_summary(self, g: _Group) -> None:
         seq = self._seq
         self._seq = (self._seq + 1) % 256
-        self.send(
-            SummaryHeader(
-                seq, g.n_cycles, g.harmonics, g.first_cycle, g.samples_per_cycle, g.table_seq
-            ).encode(self.node)
-        )
-        mean = g.total / g.count
-        for ch in range(self.n_channels):
-            for k in range(1, g.harmonics + 1):
-                self.send(SummaryData(seq, ch, k, complex(mean[k - 1, ch])).encode(self.node))
+        header = SummaryHeader(seq, g.n_cycles, g.harmonics, g.first_cycle, g.samples_per_cycle, g.table_seq)
+        for msg in encode_summary(header, g.total / g.count, self.node):
+            self.send(msg)
         self.summaries_sent += 1
 
     # ------------------------------------------------------------------ raw captures

@@ -276,9 +276,8 @@ class GoalPlanner:
             return TablePrediction(
                 frequency_hz, currents, zeros, zeros, temp, zeros, zeros, np.zeros_like(currents)
             )
-        volts = self.plant.predict(frequency_hz, currents, "voltage")
-        legs = self.plant.predict(frequency_hz, currents, "leg")
-        accel = self.plant.predict(frequency_hz, currents, "accel")
+        out = self.plant.predict_all(frequency_hz, currents, ("voltage", "leg", "accel"))
+        volts, legs, accel = out["voltage"], out["leg"], out["accel"]
         return TablePrediction(
             frequency_hz,
             currents,

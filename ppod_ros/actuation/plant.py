@@ -153,11 +153,18 @@ class NominalPlant:
         ``leg``: leg displacements (m); ``current``: coil currents (A); ``voltage``: amplifier
         output voltages (V).
         """
+        return self.responses(freq_hz, (output,))[output]
+
+    def responses(self, freq_hz, outputs: tuple[str, ...] = OUTPUTS) -> dict[str, np.ndarray]:
+        """Frequency responses of several outputs from one solve: {name: (..., 6, 6)}."""
         f = self._freqs(freq_hz)
-        Cy, Dy = self.output_matrices(output)
         s = 2j * math.pi * f[..., None, None]
         X = np.linalg.solve(s * np.eye(NX) - self.A, np.broadcast_to(self.B[:, :6], f.shape + (NX, 6)))
-        return Cy @ X + Dy[:, :6]
+        out = {}
+        for name in outputs:
+            Cy, Dy = self.output_matrices(name)
+            out[name] = Cy @ X + Dy[:, :6]
+        return out
 
     def frequency_response(self, freq_hz) -> np.ndarray:
         """Coil-current phasors (A) -> plate acceleration phasors, complex (..., 6, 6).
@@ -193,6 +200,12 @@ class NominalPlant:
 
     def predict(self, frequency_hz: float, currents: np.ndarray, output: str = "accel") -> np.ndarray:
         """Steady-state phasors of a named output for a current table (dense harmonics 1..K), (K, 6)."""
+        return self.predict_all(frequency_hz, currents, (output,))[output]
+
+    def predict_all(
+        self, frequency_hz: float, currents: np.ndarray, outputs: tuple[str, ...] = OUTPUTS
+    ) -> dict[str, np.ndarray]:
+        """Steady-state phasors of several outputs for a current table (K, 6): {name: (K, 6)}."""
         currents = np.asarray(currents, dtype=complex)
         if currents.ndim != 2 or currents.shape[1] != 6:
             raise ConfigError(
@@ -200,9 +213,9 @@ class NominalPlant:
             )
         K = currents.shape[0]
         if K == 0:
-            return np.zeros((0, 6), dtype=complex)
-        G = self.response(frequency_hz * np.arange(1, K + 1), output)
-        return np.einsum("kij,kj->ki", G, currents)
+            return {name: np.zeros((0, 6), dtype=complex) for name in outputs}
+        G = self.responses(frequency_hz * np.arange(1, K + 1), outputs)
+        return {name: np.einsum("kij,kj->ki", g, currents) for name, g in G.items()}
 
     # ------------------------------------------------------------------ modes
     def modes(self) -> list[Mode]:

@@ -644,6 +644,39 @@ class FrameCounters:
         return rec
 
 
+def encode_summary(header: SummaryHeader, phasors: np.ndarray, node: int) -> list[can.Message]:
+    """A whole harmonic summary: the header and one SUMMARY_DATA frame per (channel, harmonic).
+
+    Vectorised equivalent of ``[header] + [SummaryData(seq, c, k, phasors[k-1, c]) ...]`` (channel
+    by channel, harmonics ascending), for the device's per-cycle output.
+
+    Parameters
+    ----------
+    phasors : complex array, shape (H, C) with H == header.harmonics (m/s^2)
+    """
+    X = np.asarray(phasors, dtype=complex)
+    H, C = X.shape
+    if header.harmonics != H or not 1 <= C <= MAX_CHANNELS or not np.all(np.isfinite(X)):
+        raise _err(
+            "out of range",
+            f"phasors: expected a finite ({header.harmonics}, <= {MAX_CHANNELS}) table, got {X.shape}",
+        )
+    parts = np.rint(np.stack([X.real, X.imag], axis=-1).transpose(1, 0, 2) / SUMMARY_LSB_MPS2)  # (C, H, 2)
+    if np.any(np.abs(parts) > INT24_MAX):
+        raise _err("out of range", f"phasors: a value exceeds +-{INT24_MAX * SUMMARY_LSB_MPS2:g} m/s^2")
+    v = parts.astype(np.int64).reshape(-1, 2) & 0xFFFFFF
+    data = np.empty((C * H, 8), dtype=np.uint8)
+    data[:, 0] = header.seq
+    data[:, 1] = (np.repeat(np.arange(C), H) << 4) | np.tile(np.arange(1, H + 1), C)
+    for j in range(3):
+        data[:, 2 + j] = (v[:, 0] >> (8 * j)) & 0xFF
+        data[:, 5 + j] = (v[:, 1] >> (8 * j)) & 0xFF
+    arb = can_id(Fn.SUMMARY_DATA, node)
+    return [header.encode(node)] + [
+        can.Message(arbitration_id=arb, data=row.tobytes(), is_extended_id=False) for row in data
+    ]
+
+
 def table_checksum(entries: list[TableEntry]) -> int:
     """CRC-16/CCITT (init 0xFFFF) over the entries' bytes 1..7, sorted by (k, actuator)."""
     data = b"".join(e.checksum_bytes() for e in sorted(entries, key=lambda e: (e.k, e.actuator)))
@@ -701,6 +734,7 @@ __all__ = [
     "Version",
     "VersionRequest",
     "decode",
+    "encode_summary",
     "encode_table",
     "table_checksum",
 ]

@@ -31,6 +31,7 @@ from ppod_ros.can.codec import (
     Version,
     VersionRequest,
     decode,
+    encode_summary,
     encode_table,
     table_checksum,
 )
@@ -309,3 +310,21 @@ def test_frame_bits_follow_the_worst_case_stuffing_formula():
     assert bus_load([8] * 1000, 1.0, 1_000_000) == pytest.approx(0.135)
     with pytest.raises(ProtocolError):
         frame_bits(9)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(1, 10), st.integers(1, 16), st.integers(0, 2**31))
+def test_bulk_summary_encoding_equals_frame_by_frame_encoding(H, C, seed):
+    rng = np.random.default_rng(seed)
+    X = (rng.normal(size=(H, C)) + 1j * rng.normal(size=(H, C))) * 10 ** rng.uniform(-3, 2.5)
+    X *= min(1.0, 500.0 / np.max(np.abs(X)))
+    header = SummaryHeader(9, 2, H, 1234, 70, 3)
+    bulk = encode_summary(header, X, NODE)
+    single = [header.encode(NODE)] + [
+        SummaryData(9, c, k, complex(X[k - 1, c])).encode(NODE) for c in range(C) for k in range(1, H + 1)
+    ]
+    assert [(m.arbitration_id, bytes(m.data)) for m in bulk] == [
+        (m.arbitration_id, bytes(m.data)) for m in single
+    ]
+    with pytest.raises(ProtocolError, match="out of range"):
+        encode_summary(header, X * 0 + 600.0, NODE)

@@ -191,7 +191,7 @@ def bench_latency_in_process(args) -> dict:
         while sink.recv(0) is not None:
             pass
     frames = len(bus.stamps)
-    for b in (sink, raw):
+    for b in (bus, sink, raw):
         b.shutdown()
     return {
         "plan": _percentiles(plan_only),

@@ -167,6 +167,53 @@ class GoalPlanner:
         self.kinematics = self.plant.kinematics
 
     # ------------------------------------------------------------------ goals
+    def plan_arrays(
+        self,
+        frequency_hz: float,
+        k,
+        amplitude,
+        phase,
+        *,
+        name: str = "",
+        ramp_time_s: float | None = None,
+    ) -> GoalPlan:
+        """Plan a goal given as raw fields (e.g. from a message), rejecting bad ones with the reason.
+
+        Non-finite numbers raise :class:`ConfigError` naming the field; a frequency outside
+        ``limits.frequency_range_hz`` (including <= 0) and harmonic numbers above
+        ``limits.max_harmonic`` raise :class:`LimitError`; then as :meth:`plan`.
+        """
+        lim = self.config.limits
+        try:
+            f = float(frequency_hz)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"frequency_hz: expected a number in Hz, got {frequency_hz!r}") from exc
+        if not np.isfinite(f):
+            raise ConfigError(f"frequency_hz: must be finite, got {frequency_hz!r}")
+        lo, hi = lim.frequency_range_hz
+        if not lo <= f <= hi:
+            raise LimitError(
+                f"frequency {f:g} Hz is outside limits.frequency_range_hz = [{lo:g}, {hi:g}] Hz",
+                limit="limits.frequency_range_hz",
+                limit_value=lo if f < lo else hi,
+                requested=f,
+            )
+        for field_name, values in (("amplitude", amplitude), ("phase", phase)):
+            arr = np.asarray(values, dtype=float)
+            if not np.all(np.isfinite(arr)):
+                raise ConfigError(f"harmonics.{field_name}: all values must be finite, got {arr.tolist()}")
+        kk = np.asarray(k)
+        if kk.size and np.all(np.isfinite(kk.astype(float))) and np.max(kk) > lim.max_harmonic:
+            top = float(np.max(kk))
+            raise LimitError(
+                f"harmonic {top:g} is above limits.max_harmonic = {lim.max_harmonic}",
+                limit="limits.max_harmonic",
+                limit_value=lim.max_harmonic,
+                requested=top,
+            )
+        motion = PlateMotion(f, kk, amplitude, phase, name=name, ramp_time_s=ramp_time_s)
+        return self.plan(motion)
+
     def plan(self, motion: PlateMotion) -> GoalPlan:
         """Validate ``motion`` against every limit and compute its current table.
 

@@ -442,6 +442,37 @@ class DeviceLink:
             for cb in self.on_raw:
                 cb(cap)
 
+    # ------------------------------------------------------------------ health
+    def status_age_s(self) -> float:
+        """Seconds since the device's last STATUS frame (inf before the first): its heartbeat."""
+        received = self.status.received_at
+        return math.inf if math.isnan(received) else self.clock() - received
+
+    def health(self, stale_after_s: float | None = None) -> dict:
+        """A flat summary for diagnostics: link state, device state and every error counter.
+
+        ``stale`` is true when no STATUS arrived for ``stale_after_s`` (default: three status periods):
+        a lost device, a cut bus or bus-off.
+        """
+        stale_after = 3.0 / self.config.can.status_rate_hz if stale_after_s is None else stale_after_s
+        c, s = self.counters, self.status
+        age = self.status_age_s()
+        return {
+            "stale": age > stale_after,
+            "status_age_s": age,
+            "state": s.state.name if s.state is not None else "UNKNOWN",
+            "faults": ", ".join(s.fault_names),
+            "device_rx_rejected": s.rx_rejected,
+            "frames_accepted": c.frames.accepted,
+            "frames_rejected": c.frames.rejected_total,
+            "frames_foreign": c.frames.foreign,
+            "frames_sent": c.sent,
+            "send_errors": c.send_errors,
+            "summaries": c.summaries,
+            "summaries_incomplete": c.summaries_incomplete,
+            "raw_incomplete": c.raw_incomplete,
+        }
+
     # ------------------------------------------------------------------ waiting
     def wait_for(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Poll (or, with a running receive thread, wait) until ``predicate()`` or the timeout."""

@@ -30,8 +30,9 @@ from ppod_ros.errors import ConfigError
 from ppod_ros.motion import MAX_HARMONIC
 
 NUM_ACTUATORS = 6
-#: The CAN protocol addresses channels with 4 bits.
+#: The CAN protocol addresses channels with 4 bits and averages at most 16 cycles per summary.
 MAX_CHANNELS = 16
+MAX_SUMMARY_CYCLES = 16
 #: DESIGN.md, device safety: heartbeat checked at least every 10 ms, ramp to zero within 100 ms.
 MAX_WATCHDOG_CHECK_S = 0.010
 MAX_WATCHDOG_RAMP_S = 0.100
@@ -495,6 +496,12 @@ def device_config_from_dict(data: Mapping[str, Any], source: str = "") -> Device
         source=source,
     )
     f.finish()
+    if cfg.limits.frequency_range_hz[1] > MAX_SUMMARY_CYCLES * cfg.can.summary_max_rate_hz:
+        raise ConfigError(
+            f"limits.frequency_range_hz: above {MAX_SUMMARY_CYCLES} x can.summary_max_rate_hz = "
+            f"{MAX_SUMMARY_CYCLES * cfg.can.summary_max_rate_hz:g} Hz the accelerometer summaries (at most "
+            f"{MAX_SUMMARY_CYCLES} cycles each) would exceed their configured rate"
+        )
     if cfg.limits.frequency_range_hz[0] <= 0 or cfg.sim.idle_frequency_hz > cfg.limits.frequency_range_hz[1]:
         raise ConfigError("sim.idle_frequency_hz: must lie within limits.frequency_range_hz")
     if not math.isfinite(cfg.accelerometers.sample_rate_hz):

@@ -76,6 +76,7 @@ def test_with_mismatch_zero_returns_an_exact_plant_config():
         (("limits", "frequency_range_hz"), [50.0, 10.0], "limits.frequency_range_hz"),
         (("limits", "max_harmonic"), 11, "limits.max_harmonic: must be <= 10"),
         (("sim", "mismatch", "gain"), 2.0, "sim.mismatch.gain: must be <= 0.9"),
+        (("limits", "frequency_range_hz"), [5.0, 600.0], "would exceed their configured rate"),
     ],
 )
 def test_invalid_values_are_rejected_naming_the_key(path, value, message):

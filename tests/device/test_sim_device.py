@@ -115,26 +115,35 @@ def test_with_mismatch_the_error_is_what_the_drawn_mismatch_implies(rig):
     assert third > 0.005 and third == pytest.approx(third_predicted, rel=0.2)
 
 
+ONE = [[1.0, 0, 0, 0, 0, 0]]
+ZERO = [[0.0] * 6]
+
+
 @pytest.mark.parametrize(
-    "make_goal",
+    ("plan_goal", "limit"),
     [
-        lambda: PlateMotion.single(30, [40, 0, 0, 0, 0, 0]),  # plate acceleration
-        lambda: LINESINKX.scaled(1.5),  # contact margin
-        lambda: PlateMotion(30.0, [6], [[1, 0, 0, 0, 0, 0]], [[0] * 6]),  # too many harmonics
-        lambda: PlateMotion.single(30, [math.nan, 0, 0, 0, 0, 0]),  # NaN
-        lambda: PlateMotion.single(-30, [1, 0, 0, 0, 0, 0]),  # negative frequency
-        lambda: PlateMotion(30.0, [11], [[1, 0, 0, 0, 0, 0]], [[0] * 6]),  # harmonic number 11
+        (lambda p: p.plan(PlateMotion.single(30, [40, 0, 0, 0, 0, 0])), "limits.plate_accel_mps2"),
+        (lambda p: p.plan(LINESINKX.scaled(1.5)), "limits.contact_margin_mps2"),
+        (lambda p: p.plan(PlateMotion(30.0, [6], ONE, ZERO)), "limits.max_harmonic"),
+        (lambda p: p.plan_arrays(30.0, [11], ONE, ZERO), "limits.max_harmonic"),
+        (lambda p: p.plan_arrays(30.0, [1], [[math.nan, 0, 0, 0, 0, 0]], ZERO), None),
+        (lambda p: p.plan_arrays(math.nan, [1], ONE, ZERO), None),
+        (lambda p: p.plan_arrays(-30.0, [1], ONE, ZERO), "limits.frequency_range_hz"),
+        (lambda p: p.plan_arrays(0.0, [1], ONE, ZERO), "limits.frequency_range_hz"),
     ],
 )
-def test_rejected_goals_send_nothing_on_the_bus(rig, make_goal):
+def test_rejected_goals_send_nothing_on_the_bus(rig, plan_goal, limit):
     r = rig()
     r.link.enable()
     r.run(0.2)
     before = len(r.capture())
     host_frames_before = r.link.counters.sent
     with pytest.raises(PpodError) as info:
-        r.link.send_goal(r.planner, make_goal())
-    assert isinstance(info.value, (LimitError, ConfigError)) and str(info.value)
+        r.link.send_plan(plan_goal(r.planner))
+    if limit is None:
+        assert isinstance(info.value, ConfigError) and "finite" in str(info.value)
+    else:
+        assert isinstance(info.value, LimitError) and info.value.limit == limit and limit in str(info.value)
     r.device.advance(0.05)
     frames = r.capture()[before:]
     table_fns = {5, 6, 7}
@@ -384,6 +393,8 @@ def test_steady_state_bus_load_stays_below_30_percent_of_1_mbit(rig):
 def test_status_reports_the_device_clock_cycles_and_heartbeat_age(rig):
     r = rig()
     r.start(settle_s=1.2)
+    health = r.link.health()
+    assert not health["stale"] and health["state"] == "ENABLED" and health["frames_rejected"] == 0
     s = r.link.status
     assert s.state == DeviceState.ENABLED and s.faults == 0
     assert s.device_time_s == pytest.approx(r.device.time_s, abs=0.11)

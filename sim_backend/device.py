@@ -59,7 +59,7 @@ from ppod_ros.can.protocol import (
 from ppod_ros.device.config import DeviceConfig
 from ppod_ros.motion import MAX_HARMONIC, PlateMotion
 from ppod_sim.drive import ActuatorDrive
-from ppod_sim.plant import PlantSimulator
+from ppod_sim.plant import ChunkResult, PlantSimulator
 from ppod_sim.player import Table, TablePlayer
 from ppod_sim.sensors import AccelerometerArray
 from ppod_sim.telemetry import Telemetry
@@ -114,6 +114,17 @@ class CycleTruth:
             self.accel,
             name=f"cycle {self.cycle_index}",
         )
+
+
+@dataclass
+class _Ahead:
+    """The plant computed ahead for the rest of a cycle, released period by period."""
+
+    res: ChunkResult
+    chunks: int
+    rows_per_chunk: int
+    version: int
+    next_chunk: int = 0
 
 
 @dataclass
@@ -194,6 +205,7 @@ class SimDevice:
         self.cycle_start_s = self.time_s
         self.cycle_frequency_hz = f
         self.step_in_cycle = 0
+        self._ahead: _Ahead | None = None
         self._cycle_samples: list[np.ndarray] = []
         self._cycle_truth: list[np.ndarray] = []
         self._cycle_peaks = np.zeros((3, 6))
@@ -382,12 +394,16 @@ class SimDevice:
         return bool(predicate(self))
 
     def step(self, max_chunks: int = 1) -> None:
-        """Read the bus, check safety, then play and simulate up to ``max_chunks`` firmware periods.
+        """Read the bus, check safety, then play up to ``max_chunks`` firmware periods.
 
-        One firmware period (chunk) is at most ``timing.watchdog_check_s``. With ``max_chunks`` > 1
-        (faster-than-real-time runs) the periods up to the cycle end are computed in one vectorised
-        call: frames are read at its start only, and it ends early at the period where the
-        watchdog would expire, so the watchdog still acts at the period it would have.
+        One firmware period (chunk) is at most ``timing.watchdog_check_s``. The plant is computed
+        ahead, in one vectorised call, from the current period to the cycle end (or to the period
+        where the watchdog would expire); each step then only releases the next periods (sensor
+        readings, truth, faults, thermal state). When anything changes the drive on the way (an
+        e-stop, disable, the watchdog, a fault), the precomputed rest is discarded and the plant
+        resumes from the current period, so every period plays exactly what the firmware decided at
+        its start. With ``max_chunks`` > 1 (faster than real time) several periods are released per
+        step and frames are read at the step's start only.
         """
         self._receive()
         self._check_watchdog()
@@ -402,9 +418,45 @@ class SimDevice:
         ):
             self.state = DeviceState.ENABLED
         self._report_status()
+        a = self._ahead
+        if a is None or a.next_chunk >= a.chunks or a.version != self.player.version:
+            if a is not None and a.next_chunk < a.chunks:
+                row = a.next_chunk * a.rows_per_chunk  # resume from the current period
+                self.plant.set_state(a.res.x_grid[row], a.res.u_grid[row])
+            a = self._ahead = self._compute_ahead()
+        chunks = min(max(1, int(max_chunks)), a.chunks - a.next_chunk)
+        first = a.next_chunk * a.rows_per_chunk
+        last = first + chunks * a.rows_per_chunk  # exclusive for samples; the period end for states
+        res, dt_sample = a.res, self.steps_per_sample * self.dt_s
+        samples = slice(first, last)
+        self._cycle_samples.append(
+            self.sensors.read(
+                res.accel_plate[samples], res.omega_plate[samples], res.gravity_plate[samples], dt_sample
+            )
+        )
+        self._cycle_truth.append(res.accel_plate[samples])
+        states = slice(first, last + 1)
+        current, voltage, leg = res.current[states], res.voltage[states], res.leg[samples]
+        self._cycle_peaks = np.maximum(
+            self._cycle_peaks,
+            np.stack([np.max(np.abs(current), 0), np.max(np.abs(voltage), 0), np.max(np.abs(leg), 0)]),
+        )
+        self._current_end = current[-1]
+        L = chunks * self.steps_per_chunk
+        self._update_thermal(current, L * self.dt_s)
+        self._check_faults(current, voltage, leg)
+        self.telemetry.pump(L * self.dt_s)
+        a.next_chunk += chunks
+        self.step_in_cycle += L
+        self.time_s = self.cycle_start_s + self.step_in_cycle * self.dt_s
+        if self.step_in_cycle >= self.steps_per_cycle:
+            self._end_cycle()
+
+    def _compute_ahead(self) -> _Ahead:
+        """Simulate from the current period to the cycle end, or to the watchdog's deadline."""
         n0 = self.step_in_cycle
-        chunks = min(max(1, int(max_chunks)), (self.steps_per_cycle - n0) // self.steps_per_chunk)
-        if chunks > 1 and self.state in (DeviceState.ENABLED, DeviceState.RAMPING):
+        chunks = (self.steps_per_cycle - n0) // self.steps_per_chunk
+        if self.state in (DeviceState.ENABLED, DeviceState.RAMPING):
             # End at the first period boundary where the heartbeat would be too old.
             age = self.heartbeat_age_s()
             j = math.floor((self.config.timing.watchdog_timeout_s - age) / self.chunk_s) + 1
@@ -413,34 +465,16 @@ class SimDevice:
         steps = np.arange(n0, n0 + L + 1)
         t = self.cycle_start_s + steps * self.dt_s
         theta = 2 * math.pi * steps / self.steps_per_cycle
-        ref = self.player.reference(t, theta)
-        res = self.plant.simulate(ref, self.dt_s, every=m)
-        self._cycle_samples.append(
-            self.sensors.read(res.accel_plate, res.omega_plate, res.gravity_plate, m * self.dt_s)
-        )
-        self._cycle_truth.append(res.accel_plate)
-        self._cycle_peaks = np.maximum(
-            self._cycle_peaks,
-            np.stack(
-                [np.max(np.abs(res.current), 0), np.max(np.abs(res.voltage), 0), np.max(np.abs(res.leg), 0)]
-            ),
-        )
-        self._current_end = res.current[-1]
-        self._update_thermal(res.current, L * self.dt_s)
-        self._check_faults(res)
-        self.telemetry.pump(L * self.dt_s)
-        self.time_s = self.cycle_start_s + (n0 + L) * self.dt_s
-        self.step_in_cycle = n0 + L
-        if self.step_in_cycle >= self.steps_per_cycle:
-            self._end_cycle()
+        res = self.plant.simulate(self.player.reference(t, theta), self.dt_s, every=m)
+        return _Ahead(res, chunks, self.steps_per_chunk // m, self.player.version)
 
-    def _check_faults(self, res) -> None:
+    def _check_faults(self, current: np.ndarray, voltage: np.ndarray, leg: np.ndarray) -> None:
         lim = self.config.limits
-        if np.max(np.abs(res.voltage)) > lim.amplifier_voltage_v:
+        if np.max(np.abs(voltage)) > lim.amplifier_voltage_v:
             self._fault(Fault.VOLTAGE)
-        if np.max(np.abs(res.leg)) > lim.leg_stroke_m:
+        if np.max(np.abs(leg)) > lim.leg_stroke_m:
             self._fault(Fault.STROKE)
-        if np.max(np.abs(res.current)) > lim.coil_current_a:
+        if np.max(np.abs(current)) > lim.coil_current_a:
             self._fault(Fault.OVER_CURRENT)
         if np.max(self.coil_temperature_c) > lim.coil_temperature_c:
             self._fault(Fault.THERMAL)

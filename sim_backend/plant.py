@@ -48,6 +48,7 @@ class Discretisation:
     rows: int
     Phi_m: np.ndarray  # (24, 24)
     Gamma: np.ndarray  # (every + 1, 24, 18)
+    Gamma_flat: np.ndarray  # ((every + 1) 18, 24): Gamma stacked for one matrix product per chunk
     powers: np.ndarray  # (rows + 1, 24, 24)
     doubling: tuple[np.ndarray, ...]  # (Phi^m)^(2^l)
 
@@ -85,6 +86,8 @@ class ChunkResult:
     voltage: np.ndarray
     leg: np.ndarray
     current: np.ndarray
+    x_grid: np.ndarray = None  # (n+1, 24) plant state at the reported rows and the chunk end
+    u_grid: np.ndarray = None  # (n+1, 18) inputs there (the disturbance part carries over)
 
 
 class PlantSimulator:
@@ -145,7 +148,8 @@ class PlantSimulator:
             while span < rows:
                 doubling.append(Q)
                 Q, span = Q @ Q, 2 * span
-            d = Discretisation(float(dt_s), m, int(rows), Phi_m, Gamma, powers, tuple(doubling))
+            flat = np.ascontiguousarray(Gamma.transpose(0, 2, 1).reshape((m + 1) * NU, NX))
+            d = Discretisation(float(dt_s), m, int(rows), Phi_m, Gamma, flat, powers, tuple(doubling))
             if len(self._cache) > 16:
                 self._cache.clear()
             self._cache[key] = d
@@ -157,8 +161,8 @@ class PlantSimulator:
         """States at the grid rows 0, m, ..., L for control-step inputs U (L+1, 18), by a prefix scan."""
         m = d.every
         J = (U.shape[0] - 1) // m
-        blocks = U[np.arange(J)[:, None] * m + np.arange(m + 1)]  # (J, m+1, 18)
-        W = np.einsum("jik,ilk->jl", blocks, d.Gamma)  # (J, 24): drives grid row j+1
+        blocks = U[np.arange(J)[:, None] * m + np.arange(m + 1)].reshape(J, -1)  # (J, (m+1) 18)
+        W = blocks @ d.Gamma_flat  # (J, 24): drives grid row j+1
         span = 1
         for P in d.doubling:
             if span >= J:
@@ -273,8 +277,26 @@ class PlantSimulator:
         Cv, Dv = self.model.output_matrices("voltage")
         voltage = X @ Cv.T + U[grid] @ Dv.T
         return ChunkResult(
-            Xs, accel_world, accel_plate, omega_plate, gravity_plate, voltage, leg, X[:, 12:18].copy()
+            Xs,
+            accel_world,
+            accel_plate,
+            omega_plate,
+            gravity_plate,
+            voltage,
+            leg,
+            X[:, 12:18].copy(),
+            X,
+            U[grid],
         )
+
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        """The plant state and the carried-over input (to resume a simulation from here)."""
+        return self.x.copy(), self._u_last.copy()
+
+    def set_state(self, x: np.ndarray, u_last: np.ndarray) -> None:
+        """Resume from a state returned by :meth:`state` or a row of ``ChunkResult.x_grid/u_grid``."""
+        self.x = np.array(x, dtype=float)
+        self._u_last = np.array(u_last, dtype=float)
 
 
 __all__ = ["ChunkResult", "Discretisation", "PlantSimulator", "foh_discretise"]

@@ -64,6 +64,8 @@ class TablePlayer:
         self._t0 = 0.0
         self._duration = 0.0
         self._switching = False
+        #: Incremented whenever the output changes course: a precomputed plant response is stale.
+        self.version = 0
 
     # ------------------------------------------------------------------ ramps
     def progress(self, now: float) -> float:
@@ -90,6 +92,7 @@ class TablePlayer:
         )
         self._src_trim, self._dst_trim = self._src.trimmed(), self._dst.trimmed()
         self._t0, self._duration = now, max(float(ramp_s), 0.0)
+        self.version += 1
         if self._duration == 0:
             self._src = self._dst
             self._src_trim = self._dst_trim

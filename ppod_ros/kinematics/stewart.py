@@ -28,9 +28,10 @@ from ppod_ros.motion import PlateMotion
 def skew(v: np.ndarray) -> np.ndarray:
     """Cross-product matrices [v]x, shape (..., 3, 3), of vectors (..., 3)."""
     v = np.asarray(v, dtype=float)
-    z = np.zeros(v.shape[:-1])
-    x, y, w = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+    K = np.zeros(v.shape[:-1] + (3, 3))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    K[..., 1, 0], K[..., 2, 0], K[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return K
 
 
 def _series(theta2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -59,11 +60,15 @@ def rotation_and_left_jacobian(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     """R = exp([phi]x) and J_l(phi) together (they share [phi]x and its square), (..., 3, 3) each."""
     phi = np.asarray(phi, dtype=float)
     K = skew(phi)
-    K2 = K @ K
-    a, b, c, _ = _series(np.sum(phi * phi, axis=-1))
-    eye = np.eye(3)
-    R = eye + a[..., None, None] * K + b[..., None, None] * K2
-    Jl = eye + b[..., None, None] * K + c[..., None, None] * K2
+    theta2 = np.sum(phi * phi, axis=-1)
+    K2 = phi[..., :, None] * phi[..., None, :]  # [phi]x^2 = phi phi^T - |phi|^2 I
+    K2[..., [0, 1, 2], [0, 1, 2]] -= theta2[..., None]
+    a, b, c, _ = _series(theta2)
+    a, b, c = a[..., None, None], b[..., None, None], c[..., None, None]
+    R = a * K + b * K2
+    Jl = b * K + c * K2
+    R[..., [0, 1, 2], [0, 1, 2]] += 1.0
+    Jl[..., [0, 1, 2], [0, 1, 2]] += 1.0
     return R, Jl
 
 

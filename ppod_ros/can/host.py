@@ -263,8 +263,17 @@ class DeviceLink:
         return seq
 
     def send_plan(self, plan) -> int:
-        """Send a :class:`~ppod_ros.actuation.planning.GoalPlan`'s table (or a CorrectionResult's)."""
+        """Send a :class:`~ppod_ros.actuation.planning.GoalPlan`'s table with its ramp; returns its seq."""
         return self.send_table(plan.currents_a, plan.frequency_hz, plan.ramp_s)
+
+    def send_correction(self, plan, result, ramp_s: float | None = None) -> int:
+        """Send a corrected table (a ``CorrectionResult`` of ``plan``), crossfaded over ``ramp_s``.
+
+        The default ramp is the device minimum (``timing.min_ramp_s``): corrections are small
+        steps, clipped by the planner, and still never applied as a step on the coils.
+        """
+        ramp = self.config.timing.min_ramp_s if ramp_s is None else ramp_s
+        return self.send_table(result.currents_a, plan.frequency_hz, ramp)
 
     def send_goal(self, planner, motion):
         """Validate ``motion`` with ``planner`` (a GoalPlanner) and send it only if it passes every limit.

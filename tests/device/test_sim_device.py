@@ -430,3 +430,19 @@ def test_malformed_frames_reach_the_device_counted_never_crashing_it(rig):
     r.run(0.3)
     assert r.device.counters.rejected_total > 0
     assert r.link.status.rx_rejected == r.device.counters.rejected_total
+
+
+def test_a_correction_reaches_the_plate_through_the_table(rig):
+    r = rig(exact_config())
+    _, plan = r.start()
+    before = r.device.last_truth().accel
+    corr = np.zeros((3, 6), complex)
+    corr[2] = 0.1  # 0.1 A of third harmonic on every coil
+    result = r.planner.correct(plan, corr)
+    seq = r.link.send_correction(plan, result)
+    r.run(0.3)
+    assert [a.result for a in r.link.acks[seq]] == [AckResult.ACCEPTED, AckResult.ACTIVE]
+    after = r.device.last_truth().accel
+    expected = r.planner.plant.frequency_response(90.0) @ corr[2]
+    assert np.allclose(after[2] - before[2], expected, atol=0.01 * np.max(np.abs(expected)) + 1e-3)
+    assert np.allclose(after[0], before[0], atol=1e-2)

@@ -3,9 +3,9 @@
 A ``DeviceLink`` owns a ``can.BusABC`` (from :func:`ppod_ros.can.bus.open_bus`) and does what the
 waveform generator, scripts and ``ppod estop`` need: the protocol-version handshake; tables,
 commits, ramps, enable/disable, heartbeats and the emergency stop; and decoding of the device's
-frames into :class:`DeviceSnapshot` (status), :class:`AccelSummary` (harmonic summaries, complete
-ones only) and :class:`RawCapture` records. Malformed frames and incomplete summaries are counted,
-never raised.
+frames into :class:`DeviceSnapshot` (status), ``AccelSummary`` (harmonic summaries, complete ones
+only) and ``RawCapture`` records (:mod:`ppod_ros.can.assembly`). Malformed frames and incomplete
+summaries are counted, never raised.
 
 Threading: :meth:`DeviceLink.poll` processes received frames in the caller's thread (deterministic,
 for tests and single-threaded programs); :meth:`DeviceLink.start` runs it in a background thread
@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import can
 import numpy as np
 
+from ppod_ros.can.assembly import AccelSummary, RawAssembler, RawCapture, SummaryAssembler
 from ppod_ros.can.codec import (
     CoilRms,
     CoilTemps,
@@ -92,69 +93,6 @@ class DeviceSnapshot:
         return fault_names(self.faults)
 
 
-@dataclass(frozen=True, eq=False)
-class AccelSummary:
-    """One harmonic summary of every accelerometer channel.
-
-    Attributes
-    ----------
-    seq : int
-    first_cycle : int
-        Device cycle index (mod 2^24) of the first averaged cycle; phases refer to cycle starts.
-    n_cycles : int
-        Whole cycles averaged.
-    samples_per_cycle : int
-        Samples per cycle: sample n of a cycle was taken n T / N after its start.
-    table_seq : int
-        The device's active table when the summary was computed.
-    frequency_hz : float
-        The fundamental of that table as sent by this link (NaN if it was not sent by it).
-    k : ndarray, shape (H,)
-        Harmonics 1..H.
-    phasors : complex ndarray, shape (H, C)
-        Channel phasors (m/s^2), ``y_c(t) = sum_k Im(X_kc e^{i k Omega t})``.
-    received_at : float
-        Host monotonic time of the last frame.
-    """
-
-    seq: int
-    first_cycle: int
-    n_cycles: int
-    samples_per_cycle: int
-    table_seq: int
-    frequency_hz: float
-    k: np.ndarray
-    phasors: np.ndarray
-    received_at: float
-
-
-@dataclass(frozen=True, eq=False)
-class RawCapture:
-    """Raw accelerometer samples of whole cycles: ``samples[n, j]`` of channel ``channels[j]``."""
-
-    capture_id: int
-    start_cycle: int
-    n_cycles: int
-    samples_per_cycle: int
-    channels: tuple[int, ...]
-    samples: np.ndarray
-
-
-@dataclass
-class _PendingSummary:
-    header: SummaryHeader
-    values: np.ndarray
-    filled: np.ndarray
-
-
-@dataclass
-class _PendingRaw:
-    header: RawHeader
-    channels: tuple[int, ...]
-    samples: np.ndarray
-    filled: np.ndarray
-
-
 @dataclass
 class LinkCounters:
     """Host-side counters (frames received are in ``frames``: a FrameCounters)."""
@@ -203,8 +141,10 @@ class DeviceLink:
         self.on_raw: list[Callable[[RawCapture], None]] = []
         self._seq = 0
         self._hb_counter = 0
-        self._summary: _PendingSummary | None = None
-        self._raw: _PendingRaw | None = None
+        self._summaries = SummaryAssembler(
+            self.n_channels, lambda seq: self.table_frequencies.get(seq, math.nan)
+        )
+        self._raws = RawAssembler()
         self._send_lock = threading.Lock()
         self._poll_lock = threading.Lock()
         self._cv = threading.Condition()
@@ -385,68 +325,26 @@ class DeviceLink:
             self.counters.unexpected += 1
 
     def _summary_header(self, rec: SummaryHeader) -> None:
-        if self._summary is not None:
-            self.counters.summaries_incomplete += 1
-        shape = (rec.harmonics, self.n_channels)
-        self._summary = _PendingSummary(rec, np.zeros(shape, complex), np.zeros(shape, bool))
+        self._summaries.header(rec)
+        self.counters.summaries_incomplete = self._summaries.incomplete
 
     def _summary_data(self, rec: SummaryData, now: float) -> None:
-        p = self._summary
-        if (
-            p is None
-            or rec.seq != p.header.seq
-            or rec.k > p.header.harmonics
-            or rec.channel >= self.n_channels
-        ):
-            self.counters.frames.rejected["summary data without header"] += 1
-            return
-        p.values[rec.k - 1, rec.channel] = rec.value_mps2
-        p.filled[rec.k - 1, rec.channel] = True
-        if p.filled.all():
-            h = p.header
-            summary = AccelSummary(
-                h.seq,
-                h.cycle_index,
-                h.n_cycles,
-                h.samples_per_cycle,
-                h.table_seq,
-                self.table_frequencies.get(h.table_seq, math.nan),
-                np.arange(1, h.harmonics + 1),
-                p.values,
-                now,
-            )
-            self._summary = None
-            self.counters.summaries += 1
+        summary = self._summaries.data(rec, now)
+        self.counters.frames.rejected["summary data without header"] = self._summaries.orphans
+        if summary is not None:
+            self.counters.summaries = self._summaries.completed
             self.summaries.append(summary)
             for cb in self.on_summary:
                 cb(summary)
 
     def _raw_header(self, rec: RawHeader) -> None:
-        if self._raw is not None:
-            self.counters.raw_incomplete += 1
-        channels = tuple(c for c in range(16) if rec.channel_mask >> c & 1)
-        n = rec.n_cycles * rec.samples_per_cycle
-        self._raw = _PendingRaw(
-            rec, channels, np.zeros((n, len(channels))), np.zeros((n, len(channels)), bool)
-        )
+        self._raws.header(rec)
+        self.counters.raw_incomplete = self._raws.incomplete
 
     def _raw_data(self, rec: RawData) -> None:
-        p = self._raw
-        if p is None or rec.channel not in p.channels:
-            self.counters.frames.rejected["raw data without header"] += 1
-            return
-        col = p.channels.index(rec.channel)
-        n = p.samples.shape[0]
-        for i, v in enumerate(rec.samples_mps2):
-            if rec.index + i < n:
-                p.samples[rec.index + i, col] = v
-                p.filled[rec.index + i, col] = True
-        if p.filled.all():
-            h = p.header
-            cap = RawCapture(
-                h.capture_id, h.start_cycle, h.n_cycles, h.samples_per_cycle, p.channels, p.samples
-            )
-            self._raw = None
+        cap = self._raws.data(rec)
+        self.counters.frames.rejected["raw data without header"] = self._raws.orphans
+        if cap is not None:
             self.captures.append(cap)
             for cb in self.on_raw:
                 cb(cap)
@@ -556,12 +454,4 @@ class DeviceLink:
         self._thread = self._hb_thread = None
 
 
-__all__ = [
-    "AccelSummary",
-    "DeviceLink",
-    "DeviceSnapshot",
-    "LinkCounters",
-    "RawCapture",
-    "fault_names",
-    "send_estop",
-]
+__all__ = ["DeviceLink", "DeviceSnapshot", "LinkCounters", "fault_names", "send_estop"]

@@ -1,4 +1,4 @@
-"""The device description: a validated, immutable :class:`DeviceConfig` loaded from YAML."""
+"""The device description: a validated, immutable :class:`DeviceConfig` (schema) loaded from YAML (config)."""
 
 from ppod_ros.device.config import (
     NUM_ACTUATORS,

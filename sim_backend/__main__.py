@@ -65,7 +65,8 @@ def main(argv: list[str] | None = None) -> int:
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
     # Imported here so that --help stays fast.
-    from ppod_sim.process import SimProcess, TruthWriter
+    from ppod_sim.process import SimProcess
+    from ppod_sim.truth import TruthWriter
 
     try:
         config = load_device_config(args.config)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import can
 import numpy as np
 
-from ppod_ros.actuation.harmonics import analyze, peak_abs
+from ppod_ros.actuation.harmonics import analyze
 from ppod_ros.can.codec import (
     CoilRms,
     CoilTemps,
@@ -46,7 +46,6 @@ from ppod_ros.can.codec import (
     TableHeader,
     Version,
     VersionRequest,
-    table_checksum,
 )
 from ppod_ros.can.protocol import (
     PROTOCOL_VERSION,
@@ -60,60 +59,16 @@ from ppod_ros.device.config import DeviceConfig
 from ppod_ros.motion import MAX_HARMONIC, PlateMotion
 from ppod_sim.drive import ActuatorDrive
 from ppod_sim.plant import ChunkResult, PlantSimulator
-from ppod_sim.player import Table, TablePlayer
+from ppod_sim.player import TablePlayer
 from ppod_sim.sensors import AccelerometerArray
+from ppod_sim.tables import TableReceiver
 from ppod_sim.telemetry import Telemetry
+from ppod_sim.truth import CycleTruth
 
 log = logging.getLogger(__name__)
 
 MIN_SAMPLES_PER_CYCLE = 32
 COIL_REPORT_PERIOD_S = 1.0
-
-
-@dataclass(frozen=True, eq=False)
-class CycleTruth:
-    """Ground truth of one completed cycle (simulation only; the real device has none).
-
-    Attributes
-    ----------
-    cycle_index : int
-    start_time_s : float
-        Device time of the cycle start.
-    frequency_hz : float
-    table_seq : int
-        The active table's sequence number at the end of the cycle.
-    amplitude_scale : float
-        Ramp progress at the end of the cycle.
-    accel : complex ndarray, shape (H, 6)
-        True plate acceleration harmonics 1..H in the plate frame, PHYSICS.md phasors.
-    accel_samples : ndarray, shape (N, 6)
-        The sampled true plate acceleration.
-    current_peak_a, voltage_peak_v, leg_peak_m : ndarray, shape (6,)
-        Peaks over the cycle of the coil currents, amplifier voltages and leg displacements.
-    current_end_a : ndarray, shape (6,)
-        Coil currents at the end of the cycle.
-    """
-
-    cycle_index: int
-    start_time_s: float
-    frequency_hz: float
-    table_seq: int
-    amplitude_scale: float
-    accel: np.ndarray
-    accel_samples: np.ndarray
-    current_peak_a: np.ndarray
-    voltage_peak_v: np.ndarray
-    leg_peak_m: np.ndarray
-    current_end_a: np.ndarray
-
-    def motion(self) -> PlateMotion:
-        """The plate's actual motion over this cycle as a PlateMotion (harmonics 1..H)."""
-        return PlateMotion.from_phasors(
-            self.frequency_hz,
-            np.arange(1, self.accel.shape[0] + 1),
-            self.accel,
-            name=f"cycle {self.cycle_index}",
-        )
 
 
 @dataclass
@@ -125,13 +80,6 @@ class _Ahead:
     rows_per_chunk: int
     version: int
     next_chunk: int = 0
-
-
-@dataclass
-class _Back:
-    header: TableHeader
-    entries: dict[tuple[int, int], TableEntry]
-    duplicates: int = 0
 
 
 class SimDevice:
@@ -171,7 +119,7 @@ class SimDevice:
         self._disabling = False
         self.last_heartbeat_s: float | None = None
         self.cycle_index = 0
-        self._back: _Back | None = None
+        self.tables = TableReceiver(config.limits, config.timing.min_ramp_s)
         self.frames_tx = 0
         self.bytes_tx = 0
         self._next_status_s = 0.0
@@ -247,14 +195,10 @@ class SimDevice:
         elif isinstance(rec, Control):
             self._control(rec)
         elif isinstance(rec, TableHeader):
-            self._back = _Back(rec, {})
+            self.tables.header(rec)
         elif isinstance(rec, TableEntry):
-            if self._back is None or rec.seq != self._back.header.seq:
-                self.counters.rejected["table entry without header"] += 1
-            else:
-                key = (rec.k, rec.actuator)
-                self._back.duplicates += key in self._back.entries
-                self._back.entries[key] = rec
+            self.tables.entry(rec)
+            self.counters.rejected["table entry without header"] = self.tables.orphans
         elif isinstance(rec, TableCommit):
             self._commit(rec)
         elif isinstance(rec, VersionRequest):
@@ -293,53 +237,18 @@ class SimDevice:
             self.faults &= ~(STOPPING_FAULTS | Fault.TABLE_REJECTED)
 
     def _commit(self, rec: TableCommit) -> None:
-        back, self._back = self._back, None
-        ack = None
+        table, ack = self.tables.commit(rec)
         if self.state not in (DeviceState.ENABLED, DeviceState.RAMPING) or self._disabling:
-            ack = AckResult.BAD_STATE
-        elif (
-            back is None
-            or back.header.seq != rec.seq
-            or back.duplicates
-            or len(back.entries) != rec.n_entries
-            or back.header.n_entries != rec.n_entries
-        ):
-            ack = AckResult.INCOMPLETE
-        elif table_checksum(list(back.entries.values())) != rec.checksum:
-            ack = AckResult.CHECKSUM
-        if ack is not None:
+            table, ack = None, AckResult.BAD_STATE
+        if table is None:
             self.faults |= Fault.TABLE_REJECTED
             self._send(TableAck(rec.seq, ack, self.cycle_index).encode(self.node))
             return
-        K = max((k for k, _ in back.entries), default=1)
-        table = np.zeros((K, 6), complex)
-        for (k, a), e in back.entries.items():
-            table[k - 1, a] = e.current_a
-        if not self._table_within_limits(back.header.frequency_hz, table):
-            self.faults |= Fault.TABLE_REJECTED
-            self._send(TableAck(rec.seq, AckResult.OVER_LIMIT, self.cycle_index).encode(self.node))
-            return
         self.faults &= ~Fault.TABLE_REJECTED
-        ramp = max(back.header.ramp_s, self.config.timing.min_ramp_s)
-        old = self.player.commit(Table(rec.seq, back.header.frequency_hz, table, ramp))
+        old = self.player.commit(table)
         if old is not None:
             self._send(TableAck(old.seq, AckResult.SUPERSEDED, self.cycle_index).encode(self.node))
         self._send(TableAck(rec.seq, AckResult.ACCEPTED, self.cycle_index).encode(self.node))
-
-    def _table_within_limits(self, frequency_hz: float, table: np.ndarray) -> bool:
-        """The device's own check: peak current, harmonic and frequency limits (host checks more)."""
-        lim = self.config.limits
-        rows = np.flatnonzero(np.any(table != 0, axis=1))
-        if rows.size == 0:
-            return True
-        top = int(rows[-1] + 1)
-        if top > min(lim.max_harmonic, MAX_HARMONIC):
-            return False
-        freqs = frequency_hz * (rows + 1)
-        if np.any(freqs < lim.frequency_range_hz[0]) or np.any(freqs > lim.frequency_range_hz[1]):
-            return False
-        peak = peak_abs(table, np.arange(1, table.shape[0] + 1))
-        return bool(np.all(peak <= lim.coil_current_a))
 
     # ------------------------------------------------------------------ safety
     def emergency_stop(self) -> None:

@@ -7,50 +7,20 @@ delivers each completed cycle's true plate motion, ``on_step`` runs after every 
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import can
 
 from ppod_ros.device.config import DeviceConfig
 from ppod_sim.bridge import Bridge
 from ppod_sim.clock import Pacer
-from ppod_sim.device import CycleTruth, SimDevice
+from ppod_sim.device import SimDevice
 
 log = logging.getLogger(__name__)
-
-
-class TruthWriter:
-    """Appends each cycle's ground truth to a JSON-lines file (one object per cycle)."""
-
-    def __init__(self, path: str | Path):
-        self.file = open(path, "a", encoding="utf-8")  # noqa: SIM115 (closed by close())
-
-    def __call__(self, rec: CycleTruth) -> None:
-        self.file.write(
-            json.dumps(
-                {
-                    "cycle": rec.cycle_index,
-                    "start_time_s": rec.start_time_s,
-                    "frequency_hz": rec.frequency_hz,
-                    "table_seq": rec.table_seq,
-                    "amplitude_scale": rec.amplitude_scale,
-                    "accel_re": rec.accel.real.round(7).tolist(),
-                    "accel_im": rec.accel.imag.round(7).tolist(),
-                    "current_peak_a": rec.current_peak_a.round(6).tolist(),
-                }
-            )
-            + "\n"
-        )
-        self.file.flush()
-
-    def close(self) -> None:
-        self.file.close()
 
 
 class SimProcess:
@@ -110,4 +80,4 @@ class SimProcess:
         self.device_bus.shutdown()
 
 
-__all__ = ["SimProcess", "TruthWriter"]
+__all__ = ["SimProcess"]

@@ -1,1 +1,1 @@
-"""Actuation: the nominal plant model, harmonic tables, goal planning and limits (ROS-free)."""
+"""Actuation: harmonic tables, the nominal plant model, goal planning with limits, and corrections."""

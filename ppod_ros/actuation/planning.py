@@ -17,14 +17,14 @@ Invalid goals (NaN, frequency <= 0, harmonic numbers outside 1..10) never become
 its constructor raises :class:`~ppod_ros.errors.ConfigError` naming the field.
 
 :meth:`GoalPlanner.correct` is the entry point for the feedback loop's corrections (complex, per
-harmonic and actuator, in amperes): each entry's step is clipped to ``limits.correction_step_a``
-and the step is scaled back until the corrected table passes the actuator limits (6 above); what was
-clipped is reported, nothing past a limit is ever returned.
+harmonic and actuator, in amperes), implemented in :mod:`ppod_ros.actuation.corrections`: steps
+clipped, scaled back before any actuator limit, and reported.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -35,6 +35,9 @@ from ppod_ros.device.config import DeviceConfig
 from ppod_ros.errors import ConfigError, LimitError
 from ppod_ros.kinematics.stewart import LegTrajectory, leg_trajectory, motion_samples_per_cycle
 from ppod_ros.motion import GRAVITY_MPS2, PlateMotion
+
+if TYPE_CHECKING:
+    from ppod_ros.actuation.corrections import CorrectionResult
 
 #: The table always has room for harmonics 1..3 (DESIGN.md), so that feedback can cancel distortion.
 MIN_TABLE_HARMONICS = 3
@@ -122,24 +125,6 @@ class GoalPlan:
     @property
     def stroke_peak_m(self) -> np.ndarray:
         return self.legs.peak_m
-
-
-@dataclass(frozen=True, eq=False)
-class CorrectionResult:
-    """A corrected table and what the limiter did to the requested correction.
-
-    ``currents_a = plan.currents_a + applied_a`` (quantised); ``step_clipped`` is true when some
-    entry's step was cut to ``limits.correction_step_a``; ``limited_by`` names the limit that
-    forced the step to be scaled by ``scale`` < 1 (None when it was not).
-    """
-
-    currents_a: np.ndarray
-    applied_a: np.ndarray
-    requested_a: np.ndarray
-    step_clipped: bool
-    limited_by: str | None
-    scale: float
-    prediction: TablePrediction
 
 
 def _limit(name: str, limit_value: float, requested: float, what: str, unit: str) -> LimitError:
@@ -376,74 +361,14 @@ class GoalPlanner:
         previous: np.ndarray | None = None,
         k: np.ndarray | None = None,
     ) -> CorrectionResult:
-        """Apply a feedback correction to a plan's table, clipped and limited (module docstring).
+        """Apply a feedback correction to a plan's table (see ppod_ros.actuation.corrections)."""
+        # Imported here: the corrections module builds on this one.
+        from ppod_ros.actuation.corrections import correct_table
 
-        Parameters
-        ----------
-        plan : GoalPlan
-        requested : complex array, shape (Kc, 6)
-            The correction wanted (A), added to the feed-forward table: rows are harmonics ``k``
-            (default 1..Kc); every k must be a row of the plan's table.
-        previous : complex array, shape (K, 6), optional
-            The correction currently applied (``applied_a`` of the last result; default zero).
-        """
-        K = plan.currents_a.shape[0]
-        req = np.asarray(requested, dtype=complex)
-        if req.ndim != 2 or req.shape[1] != 6 or not np.all(np.isfinite(req)):
-            raise ConfigError(
-                f"requested: expected a finite (Kc, 6) table of current phasors (A), got {req.shape}"
-            )
-        kk = np.arange(1, req.shape[0] + 1) if k is None else np.asarray(k, dtype=int)
-        if kk.shape != (req.shape[0],) or np.any(kk < 1) or np.any(kk > K):
-            raise ConfigError(f"k: correction harmonics must lie in the table's 1..{K}, got {kk.tolist()}")
-        target = np.zeros((K, 6), dtype=complex)
-        target[kk - 1] = req
-        prev = np.zeros((K, 6), dtype=complex) if previous is None else np.asarray(previous, dtype=complex)
-        if prev.shape != (K, 6):
-            raise ConfigError(f"previous: expected shape ({K}, 6), got {prev.shape}")
-        step = target - prev
-        cap = self.config.limits.correction_step_a
-        mag = np.abs(step)
-        clipped = mag > cap
-        step = np.where(clipped, step * cap / np.maximum(mag, 1e-300), step)
-
-        def attempt(base: np.ndarray, s: float) -> tuple[np.ndarray, TablePrediction, LimitError | None]:
-            table = quantise_currents(plan.currents_a + base + s * step)
-            pred = self.predict(plan.frequency_hz, table)
-            try:
-                self.check_table(pred)
-            except LimitError as exc:
-                return table, pred, exc
-            return table, pred, None
-
-        table, pred, err = attempt(prev, 1.0)
-        if err is None:
-            return CorrectionResult(
-                table, table - plan.currents_a, target, bool(clipped.any()), None, 1.0, pred
-            )
-        limited_by = err.limit
-        base = prev
-        if attempt(prev, 0.0)[2] is not None:
-            # The previous correction itself no longer fits (e.g. carried over to a new goal):
-            # scale the whole correction from zero instead.
-            base, step = np.zeros_like(prev), prev + step
-        lo, hi = 0.0, 1.0
-        for _ in range(30):
-            mid = 0.5 * (lo + hi)
-            if attempt(base, mid)[2] is None:
-                lo = mid
-            else:
-                hi = mid
-        table, pred, err = attempt(base, lo)
-        if err is not None:  # only possible if the plan's own table is over a limit
-            raise err
-        return CorrectionResult(
-            table, table - plan.currents_a, target, bool(clipped.any()), limited_by, lo, pred
-        )
+        return correct_table(self, plan, requested, previous, k)
 
 
 __all__ = [
-    "CorrectionResult",
     "GoalPlan",
     "GoalPlanner",
     "MIN_TABLE_HARMONICS",

@@ -92,7 +92,7 @@ def test_a_goal_runs_across_processes_and_the_watchdog_stops_it_when_heartbeats_
         link.stop()
         t0 = time.monotonic()
         assert link.wait_for(lambda: link.status.state == DeviceState.WATCHDOG, timeout_s=2.0)
-        assert time.monotonic() - t0 < 1.0
+        assert time.monotonic() - t0 < 1.5
     finally:
         link.stop()
         bus.shutdown()

@@ -345,8 +345,8 @@ def bench_sim(args) -> list[dict]:
         )
         # The whole device (firmware, plant, sensors, CAN output) with a host link answering.
         for batch, label in (
-            (1, "device, 5 ms firmware periods (real-time mode)"),
-            (1 << 30, "device, cycle batches (fast mode)"),
+            (1, "device + host link in one process, 5 ms periods (real-time mode)"),
+            (1 << 30, "device + host link in one process, cycle batches (fast mode)"),
         ):
             cfg2, buses, dev, link = _rig(cfg)
             link.enable()

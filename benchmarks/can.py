@@ -1,0 +1,473 @@
+"""CAN bus load, goal-to-frame latency on the ROS-free path, bridge throughput, simulator speed.
+
+Sections (all on this machine, no ROS):
+  load     steady-state bus load from the frames actually sent (both directions, worst-case bit
+           stuffing), simulated device and host link on a virtual bus, per goal
+  latency  a two-harmonic goal: plan + encode until the first and the commit frame are on the bus
+           (in process, wall clock), and goal to the device's ACCEPTED / ACTIVE acknowledgements
+           across processes through the localhost bridge (simulator in real time)
+  bridge   frames per second the python-can-remote bridge carries from the device to a client
+  sim      how much faster than real time the simulated plant and the whole device run
+
+examples:
+  ppod bench can
+  ppod bench can --sections load latency --repeats 500
+  ppod bench can --quick
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import math
+import re
+import select
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import can
+import numpy as np
+
+HELP = "CAN bus load and goal-to-frame latency (ROS-free path), bridge throughput, simulator speed"
+SECTIONS = ("load", "latency", "bridge", "sim")
+_channels = itertools.count()
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--sections",
+        nargs="+",
+        choices=SECTIONS,
+        default=list(SECTIONS),
+        help="which sections to run (default: all)",
+    )
+    parser.add_argument(
+        "--seconds", type=float, default=3.0, help="device seconds per bus-load run (default 3)"
+    )
+    parser.add_argument(
+        "--repeats", type=int, default=200, help="goals per latency measurement (default 200)"
+    )
+    parser.add_argument("--quick", action="store_true", help="short runs (a smoke test of the benchmark)")
+
+
+def _goals():
+    from ppod_ros.motion import PlateMotion
+
+    two = PlateMotion(
+        30.0,
+        [1, 2],
+        [[10, 0, 0, 0, 100, 0], [1, 0, 0, 0, 10, 0]],
+        [[0, 0, 0, 0, 4.71238898, 0], [0, 0, 0, 0, 0, 0]],
+        name="two-harmonic",
+        ramp_time_s=0.1,
+    )
+    amp = np.zeros((5, 6))
+    amp[:, 0] = [5, 0.5, 0.5, 0.2, 0.2]
+    return [
+        ("idle (no table)", None),
+        (
+            "LineSinkX, 30 Hz",
+            PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0], ramp_time_s=0.1),
+        ),
+        ("two harmonics, 30 Hz", two),
+        ("five harmonics, 30 Hz", PlateMotion(30.0, [1, 2, 3, 4, 5], amp, np.zeros((5, 6)), ramp_time_s=0.1)),
+        ("two harmonics, 45 Hz", PlateMotion(45.0, two.k, two.amplitude, two.phase, ramp_time_s=0.1)),
+        (
+            "LineSinkX at 20 Hz",
+            PlateMotion.single(20, [4, 0, 0, 0, 40, 0], [0, 0, 0, 0, 4.71238898, 0], ramp_time_s=0.1),
+        ),
+    ]
+
+
+def _rig(config):
+    from ppod_ros.can import DeviceLink, open_bus
+    from ppod_sim.device import SimDevice
+
+    cfg = config.with_can(interface="virtual", channel=f"bench-can-{next(_channels)}")
+    buses = [open_bus(cfg.can) for _ in range(3)]
+    return cfg, buses, SimDevice(cfg, buses[0]), DeviceLink(buses[1], cfg)
+
+
+def _run_rig(dev, link, spy, duration: float, record: list[int] | None = None) -> None:
+    """Advance the device in heartbeat periods, the host answering; record the sizes of all frames."""
+    end = dev.time_s + duration
+    while dev.time_s < end - 1e-9:
+        link.heartbeat()
+        dev.advance(link.config.can.heartbeat_period_s)
+        link.poll()
+        while (msg := spy.recv(0)) is not None:
+            if record is not None:
+                record.append(len(msg.data))
+
+
+def bench_load(args) -> list[dict]:
+    from ppod_ros.actuation.planning import GoalPlanner
+    from ppod_ros.can.protocol import bus_load, frame_bits
+    from ppod_ros.device import default_device_config
+
+    rows = []
+    seconds = 1.0 if args.quick else args.seconds
+    for name, goal in _goals():
+        cfg, buses, dev, link = _rig(default_device_config())
+        spy = buses[2]
+        link.enable()
+        if goal is not None:
+            link.send_plan(GoalPlanner(cfg).plan(goal))
+        _run_rig(dev, link, spy, 0.5)  # ramp and first summaries
+        sizes: list[int] = []
+        t0 = dev.time_s
+        _run_rig(dev, link, spy, seconds, sizes)
+        duration = dev.time_s - t0
+        load = bus_load(sizes, duration, cfg.can.bitrate)
+        rows.append(
+            {
+                "goal": name,
+                "frames_per_s": len(sizes) / duration,
+                "bits_per_s": sum(frame_bits(n) for n in sizes) / duration,
+                "load": load,
+                "limit": cfg.can.bus_load_limit,
+                "summary_harmonics": (link.summaries[-1].k.size if link.summaries else 0),
+            }
+        )
+        for bus in buses:
+            bus.shutdown()
+    return rows
+
+
+def _percentiles(values: list[float]) -> dict:
+    v = np.asarray(values)
+    return {
+        "median": float(np.median(v)),
+        "p99": float(np.percentile(v, 99)),
+        "max": float(v.max()),
+        "n": len(v),
+    }
+
+
+class _StampingBus(can.BusABC):
+    """Records when each frame is handed to the inner bus (for the latency measurement)."""
+
+    def __init__(self, inner):
+        self.inner = inner
+        self.stamps: list[tuple[float, int]] = []
+        super().__init__(channel=None)
+
+    def send(self, msg, timeout=None):
+        self.inner.send(msg, timeout)
+        self.stamps.append((time.perf_counter(), msg.arbitration_id))
+
+    def _recv_internal(self, timeout):
+        return self.inner.recv(timeout), False
+
+
+def bench_latency_in_process(args) -> dict:
+    """Goal in hand -> first frame and -> commit frame on a virtual bus (plan, quantise, encode, send)."""
+    from ppod_ros.actuation.planning import GoalPlanner
+    from ppod_ros.can import DeviceLink, open_bus
+    from ppod_ros.can.protocol import Fn
+    from ppod_ros.device import default_device_config
+
+    cfg = default_device_config().with_can(interface="virtual", channel=f"bench-lat-{next(_channels)}")
+    sink, raw = open_bus(cfg.can), open_bus(cfg.can)
+    bus = _StampingBus(raw)
+    link = DeviceLink(bus, cfg)
+    planner = GoalPlanner(cfg)
+    goal = dict(_goals())["two harmonics, 30 Hz"]
+    first, commit, plan_only = [], [], []
+    for i in range(20 if args.quick else args.repeats):
+        motion = goal.scaled(1.0 - 0.001 * (i % 100))  # a new goal every time: no cache can help
+        bus.stamps.clear()
+        t0 = time.perf_counter()
+        plan = planner.plan(motion)
+        t1 = time.perf_counter()
+        link.send_plan(plan)
+        plan_only.append(t1 - t0)
+        first.append(bus.stamps[0][0] - t0)
+        commit.append(next(t for t, arb in bus.stamps if arb >> 4 == Fn.TABLE_COMMIT) - t0)
+        while sink.recv(0) is not None:
+            pass
+    frames = len(bus.stamps)
+    for b in (bus, sink, raw):
+        b.shutdown()
+    return {
+        "plan": _percentiles(plan_only),
+        "first_frame": _percentiles(first),
+        "commit_frame": _percentiles(commit),
+        "frames_per_goal": frames,
+    }
+
+
+def _start_sim(extra: list[str]) -> tuple[subprocess.Popen, str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ppod_sim", "--port", "0", *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+    line = proc.stdout.readline() if ready else ""
+    match = re.search(r"on (ws://127\.0\.0\.1:\d+/)", line)
+    if not match:
+        proc.kill()
+        raise RuntimeError(f"simulator did not start: {line!r}")
+    return proc, match.group(1)
+
+
+def _stop_sim(proc: subprocess.Popen) -> None:
+    proc.terminate()
+    try:
+        proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate(timeout=10)
+
+
+def bench_latency_bridge(args) -> dict:
+    """Goal -> ACCEPTED and -> ACTIVE acknowledgements, simulator in its own process at real time."""
+    from ppod_ros.actuation.planning import GoalPlanner
+    from ppod_ros.can import AckResult, DeviceLink, open_bus
+    from ppod_ros.device import default_device_config
+
+    repeats = 10 if args.quick else max(20, args.repeats // 5)
+    proc, url = _start_sim(["--duration", str(10 + repeats)])
+    accepted, active = [], []
+    try:
+        cfg = default_device_config().with_can(interface="remote", channel=url)
+        bus = open_bus(cfg.can)
+        link = DeviceLink(bus, cfg)
+        link.start(heartbeat=True)
+        link.handshake(timeout_s=5.0)
+        link.enable()
+        planner = GoalPlanner(cfg)
+        goal = dict(_goals())["two harmonics, 30 Hz"]
+        rng = np.random.default_rng(0)
+        for i in range(repeats):
+            time.sleep(0.1 + 0.05 * rng.random())  # land at random points of the device's cycle
+            t0 = time.perf_counter()
+            seq = link.send_plan(planner.plan(goal.scaled(1.0 - 0.01 * (i % 10))))
+            link.wait_for_ack(seq, AckResult.ACCEPTED, timeout_s=2.0)
+            accepted.append(time.perf_counter() - t0)
+            link.wait_for_ack(seq, AckResult.ACTIVE, timeout_s=2.0)
+            active.append(time.perf_counter() - t0)
+        link.stop()
+        bus.shutdown()
+    finally:
+        _stop_sim(proc)
+    return {"accepted": _percentiles(accepted), "active": _percentiles(active)}
+
+
+def bench_bridge(args) -> list[dict]:
+    """Frames per second from the device's virtual bus to a remote client, paced, counting losses."""
+    from ppod_ros.can.codec import SummaryData
+    from ppod_sim.bridge import Bridge
+
+    channel = f"bench-bridge-{next(_channels)}"
+    bridge = Bridge(channel)
+    device = can.Bus(interface="virtual", channel=channel)
+    client = can.Bus(interface="remote", channel=bridge.url)
+    time.sleep(0.2)
+    rows = []
+    seconds = 0.5 if args.quick else 2.0
+    for rate in (1000, 2000, 4000, 8000, 16000):
+        n = int(rate * seconds)
+        got: list[float] = []
+
+        def receive(n=n, got=got):
+            deadline = time.monotonic() + seconds + 5.0
+            while len(got) < n and time.monotonic() < deadline:
+                if client.recv(0.2) is not None:
+                    got.append(time.monotonic())
+
+        rx = threading.Thread(target=receive)
+        rx.start()
+        msg = SummaryData(0, 0, 1, 1 + 1j).encode(1)
+        t0 = time.monotonic()
+        for i in range(n):
+            delay = t0 + i / rate - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            device.send(msg)
+        sent_s = time.monotonic() - t0
+        rx.join()
+        done_s = (got[-1] - t0) if got else math.nan
+        rows.append(
+            {
+                "offered_fps": rate,
+                "sent_fps": n / sent_s,
+                "received": len(got),
+                "sent": n,
+                "delivered_fps": len(got) / done_s if got else 0.0,
+                "lag_s": done_s - sent_s,
+            }
+        )
+    client.shutdown()
+    device.shutdown()
+    bridge.close()
+    return rows
+
+
+def bench_sim(args) -> list[dict]:
+    from ppod_ros.actuation.planning import GoalPlanner
+    from ppod_ros.device import default_device_config
+    from ppod_ros.motion import PlateMotion
+    from ppod_sim.plant import PlantSimulator
+
+    motion = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0], ramp_time_s=0.1)
+    seconds = 1.0 if args.quick else 3.0
+    rows = []
+    base = default_device_config()
+    for exact in (True, False):
+        cfg = base.replace("sim", exact_geometry=exact)
+        # The plant alone, one cycle (280 control steps, 70 reported rows) per call.
+        plant = PlantSimulator(cfg)
+        table = GoalPlanner(cfg).plant.feedforward(motion, 1)
+        from ppod_ros.actuation.harmonics import synthesize
+
+        ref = synthesize(table, [1], 2 * np.pi * np.arange(281) / 280)
+        plant.simulate(ref, 1 / 30 / 280, every=4)
+        cycles = int(30 * seconds)
+        t0 = time.perf_counter()
+        for _ in range(cycles):
+            plant.simulate(ref, 1 / 30 / 280, every=4)
+        wall = time.perf_counter() - t0
+        rows.append(
+            {
+                "what": "plant, one cycle per call",
+                "exact_geometry": exact,
+                "device_s": cycles / 30,
+                "wall_s": wall,
+                "factor": cycles / 30 / wall,
+            }
+        )
+        # The whole device (firmware, plant, sensors, CAN output) with a host link answering.
+        for batch, label in (
+            (1, "device + host link in one process, 5 ms periods (real-time mode)"),
+            (1 << 30, "device + host link in one process, cycle batches (fast mode)"),
+        ):
+            cfg2, buses, dev, link = _rig(cfg)
+            link.enable()
+            link.send_plan(GoalPlanner(cfg2).plan(motion))
+            dev.advance(0.2, batch)
+            t0 = time.perf_counter()
+            end = dev.time_s + seconds
+            while dev.time_s < end:
+                link.heartbeat()
+                dev.advance(0.05, batch)
+                link.poll()
+                while buses[2].recv(0) is not None:
+                    pass
+            wall = time.perf_counter() - t0
+            rows.append(
+                {
+                    "what": label,
+                    "exact_geometry": exact,
+                    "device_s": seconds,
+                    "wall_s": wall,
+                    "factor": seconds / wall,
+                }
+            )
+            for bus in buses:
+                bus.shutdown()
+    return rows
+
+
+def _print_table(title: str, header: list[str], rows: list[list[str]]) -> None:
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
+    print(f"\n{title}")
+    print("  ".join(h.ljust(w) for h, w in zip(header, widths)))
+    print("  ".join("-" * w for w in widths))
+    for r in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(r, widths)))
+
+
+def run(args: argparse.Namespace) -> int:
+    out = Path(getattr(args, "out", "out/bench"))
+    out.mkdir(parents=True, exist_ok=True)
+    result: dict = {}
+    try:
+        import os
+
+        result["machine"] = {"cpus": os.cpu_count(), "load_1min": os.getloadavg()[0]}
+    except OSError:
+        pass
+    if "load" in args.sections:
+        rows = result["load"] = bench_load(args)
+        _print_table(
+            "Steady-state bus load (frames actually sent, both directions; classic CAN 1 Mbit/s, "
+            "worst-case stuffing)",
+            ["goal", "summary H", "frames/s", "kbit/s", "load", "limit"],
+            [
+                [
+                    r["goal"],
+                    str(r["summary_harmonics"]),
+                    f"{r['frames_per_s']:.0f}",
+                    f"{r['bits_per_s'] / 1e3:.1f}",
+                    f"{100 * r['load']:.1f} %",
+                    f"{100 * r['limit']:.0f} %",
+                ]
+                for r in rows
+            ],
+        )
+    if "latency" in args.sections:
+        lat = result["latency_in_process"] = bench_latency_in_process(args)
+        rows = [
+            [name, f"{1e3 * lat[key]['median']:.2f}", f"{1e3 * lat[key]['p99']:.2f}", str(lat[key]["n"])]
+            for name, key in (
+                ("plan (validate + feed-forward + quantise)", "plan"),
+                ("goal -> first CAN frame sent", "first_frame"),
+                ("goal -> commit frame sent", "commit_frame"),
+            )
+        ]
+        _print_table(
+            f"Two-harmonic goal, ROS-free path, in process ({lat['frames_per_goal']} frames per goal)",
+            ["step", "median ms", "p99 ms", "n"],
+            rows,
+        )
+        br = result["latency_bridge"] = bench_latency_bridge(args)
+        _print_table(
+            "Two-harmonic goal across processes (localhost bridge, simulator at real time, "
+            "5 ms firmware period, 33 ms cycle)",
+            ["goal -> ", "median ms", "p99 ms", "n"],
+            [
+                [name, f"{1e3 * br[key]['median']:.1f}", f"{1e3 * br[key]['p99']:.1f}", str(br[key]["n"])]
+                for name, key in (
+                    ("ACCEPTED ack received", "accepted"),
+                    ("ACTIVE ack received (next cycle start)", "active"),
+                )
+            ],
+        )
+    if "bridge" in args.sections:
+        rows = result["bridge"] = bench_bridge(args)
+        _print_table(
+            "Localhost bridge (python-can-remote), device -> client",
+            ["offered frames/s", "sent frames/s", "received / sent", "delivered frames/s", "lag s"],
+            [
+                [
+                    str(r["offered_fps"]),
+                    f"{r['sent_fps']:.0f}",
+                    f"{r['received']} / {r['sent']}",
+                    f"{r['delivered_fps']:.0f}",
+                    f"{r['lag_s']:.3f}",
+                ]
+                for r in rows
+            ],
+        )
+    if "sim" in args.sections:
+        rows = result["sim"] = bench_sim(args)
+        _print_table(
+            "Simulated device speed (LineSinkX, 30 Hz)",
+            ["what", "exact geometry", "x real time"],
+            [[r["what"], "yes" if r["exact_geometry"] else "no", f"{r['factor']:.1f}"] for r in rows],
+        )
+    if "machine" in result:
+        print(
+            f"\n(machine: {result['machine']['cpus']} CPUs, 1-minute load average "
+            f"{result['machine']['load_1min']:.2f} at the start)"
+        )
+    (out / "can.json").write_text(json.dumps(result, indent=2))
+    print(f"results: {out / 'can.json'}")
+    return 0

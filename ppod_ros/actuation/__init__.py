@@ -1,0 +1,1 @@
+"""Actuation: harmonic tables, the nominal plant model, goal planning with limits, and corrections."""

@@ -1,0 +1,99 @@
+"""The bus factory: one function opens the configured CAN backend by name.
+
+The same configuration runs in the lab and in tests (STYLE.md rule 5):
+
+=============  ==================================================================================
+``virtual``    python-can's in-process bus; ``channel`` names it (tests, the simulator's inside)
+``remote``     the localhost bridge client (python-can-remote): ``channel`` is ``ws://HOST:PORT/``,
+               served by the simulated device process (``python -m ppod_sim``)
+``socketcan``  Linux SocketCAN (``can0``, ``vcan0``); the bit rate is set by ``ip link``
+other          any python-can interface (``pcan``, ``kvaser``, ``vector``, ``slcan``, ...) with
+               ``channel`` and ``bitrate`` passed through
+=============  ==================================================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+from urllib.parse import urlparse
+
+import can
+
+from ppod_ros.device.config import CanSettings
+from ppod_ros.errors import ConfigError, DeviceError
+
+
+def _virtual(channel: str, bitrate: int, extra: dict[str, Any]) -> can.BusABC:
+    return can.Bus(interface="virtual", channel=channel, receive_own_messages=False, **extra)
+
+
+def _remote(channel: str, bitrate: int, extra: dict[str, Any]) -> can.BusABC:
+    url = urlparse(channel)
+    if url.scheme not in ("ws", "wss") or not url.hostname or url.port is None:
+        raise ConfigError(f"can.channel: the remote backend needs a ws://HOST:PORT/ address, got {channel!r}")
+    return can.Bus(interface="remote", channel=channel, **extra)
+
+
+def _socketcan(channel: str, bitrate: int, extra: dict[str, Any]) -> can.BusABC:
+    return can.Bus(interface="socketcan", channel=channel, **extra)
+
+
+def _passthrough(name: str) -> Callable[[str, int, dict[str, Any]], can.BusABC]:
+    def open_(channel: str, bitrate: int, extra: dict[str, Any]) -> can.BusABC:
+        return can.Bus(interface=name, channel=channel, bitrate=bitrate, **extra)
+
+    return open_
+
+
+BACKENDS: dict[str, Callable[[str, int, dict[str, Any]], can.BusABC]] = {
+    "virtual": _virtual,
+    "remote": _remote,
+    "socketcan": _socketcan,
+}
+
+
+def backend_names() -> list[str]:
+    """Every backend name :func:`open_bus` accepts."""
+    return sorted(set(BACKENDS) | set(can.VALID_INTERFACES))
+
+
+def open_bus(
+    settings: CanSettings | None = None,
+    *,
+    interface: str | None = None,
+    channel: str | None = None,
+    bitrate: int | None = None,
+    **extra: Any,
+) -> can.BusABC:
+    """Open the CAN bus named by ``settings`` (or the keyword overrides).
+
+    Raises
+    ------
+    ConfigError
+        Unknown backend name or malformed channel.
+    DeviceError
+        The backend exists but the bus could not be opened (no server, no interface, ...).
+    """
+    interface = interface or (settings.interface if settings else None)
+    channel = channel if channel is not None else (settings.channel if settings else None)
+    bitrate = bitrate or (settings.bitrate if settings else 1_000_000)
+    if not interface or channel is None:
+        raise ConfigError("can.interface, can.channel: both are needed to open a bus")
+    if interface in BACKENDS:
+        opener = BACKENDS[interface]
+    elif interface in can.VALID_INTERFACES:
+        opener = _passthrough(interface)
+    else:
+        raise ConfigError(
+            f"can.interface: unknown backend {interface!r}; expected one of {', '.join(backend_names())}"
+        )
+    try:
+        return opener(str(channel), int(bitrate), extra)
+    except ConfigError:
+        raise
+    except (can.CanError, OSError, ValueError, ImportError) as exc:
+        raise DeviceError(f"cannot open the {interface} bus on {channel!r}: {exc}") from exc
+
+
+__all__ = ["BACKENDS", "backend_names", "open_bus"]

@@ -1,0 +1,1 @@
+"""Stewart-platform kinematics of the plate (exact inverse kinematics, Jacobians, forward kinematics)."""

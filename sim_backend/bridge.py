@@ -1,0 +1,68 @@
+"""The localhost CAN bridge: other processes reach the simulated device's virtual bus through it.
+
+There is no SocketCAN/vcan here and python-can's ``virtual`` bus only connects buses inside one
+process. The simulator process therefore serves its virtual channel with python-can-remote's
+``RemoteServer`` (a WebSocket server; every client gets its own virtual bus on the channel), bound
+to 127.0.0.1 only (the server's own default, 0.0.0.0, would listen on every interface). Clients open
+``can.Bus(interface="remote", channel="ws://127.0.0.1:PORT/")`` (:func:`ppod_ros.can.bus.open_bus`
+with ``interface: remote``).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+from can_remote import RemoteServer
+
+from ppod_ros.errors import DeviceError
+
+log = logging.getLogger(__name__)
+
+LOOPBACK = "127.0.0.1"
+
+
+class Bridge:
+    """A python-can-remote server for one virtual channel, on 127.0.0.1.
+
+    Parameters
+    ----------
+    channel : str
+        The python-can virtual channel the device is on.
+    port : int
+        TCP port; 0 picks a free one (see :attr:`port` / :attr:`url`).
+    """
+
+    def __init__(self, channel: str, port: int = 0):
+        try:
+            self.server = RemoteServer(host=LOOPBACK, port=int(port), channel=channel, interface="virtual")
+        except OSError as exc:
+            raise DeviceError(
+                f"cannot serve the CAN bridge on {LOOPBACK}:{port}: {exc.strerror or exc}"
+            ) from exc
+        self.channel = channel
+        self.port = int(self.server.server_address[1])
+        self._thread = threading.Thread(
+            target=self.server.serve_forever,
+            kwargs={"poll_interval": 0.1},
+            name="ppod-sim-bridge",
+            daemon=True,
+        )
+        self._thread.start()
+        log.info("CAN bridge for virtual channel %r on %s", channel, self.url)
+
+    @property
+    def url(self) -> str:
+        return f"ws://{LOOPBACK}:{self.port}/"
+
+    @property
+    def clients(self) -> int:
+        return len(self.server.clients)
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+        self._thread.join(timeout=2.0)
+
+
+__all__ = ["Bridge", "LOOPBACK"]

@@ -1,0 +1,93 @@
+"""Ground truth of the simulated plate, one record per completed cycle (the real device has none).
+
+The system tests compare the plate's *true* acceleration harmonics with the goal; the parts
+simulation in the simulator process consumes ``CycleTruth.motion()``. ``TruthWriter`` appends the
+records to a JSON-lines file for other processes (``python -m ppod_sim --truth-out FILE``).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ppod_ros.motion import PlateMotion
+
+
+@dataclass(frozen=True, eq=False)
+class CycleTruth:
+    """Ground truth of one completed cycle (simulation only; the real device has none).
+
+    Attributes
+    ----------
+    cycle_index : int
+    start_time_s : float
+        Device time of the cycle start.
+    frequency_hz : float
+    table_seq : int
+        The active table's sequence number at the end of the cycle.
+    amplitude_scale : float
+        Ramp progress at the end of the cycle.
+    accel : complex ndarray, shape (H, 6)
+        True plate acceleration harmonics 1..H in the plate frame, PHYSICS.md phasors.
+    accel_samples : ndarray, shape (N, 6)
+        The sampled true plate acceleration.
+    current_peak_a, voltage_peak_v, leg_peak_m : ndarray, shape (6,)
+        Peaks over the cycle of the coil currents, amplifier voltages and leg displacements.
+    current_end_a : ndarray, shape (6,)
+        Coil currents at the end of the cycle.
+    """
+
+    cycle_index: int
+    start_time_s: float
+    frequency_hz: float
+    table_seq: int
+    amplitude_scale: float
+    accel: np.ndarray
+    accel_samples: np.ndarray
+    current_peak_a: np.ndarray
+    voltage_peak_v: np.ndarray
+    leg_peak_m: np.ndarray
+    current_end_a: np.ndarray
+
+    def motion(self) -> PlateMotion:
+        """The plate's actual motion over this cycle as a PlateMotion (harmonics 1..H)."""
+        return PlateMotion.from_phasors(
+            self.frequency_hz,
+            np.arange(1, self.accel.shape[0] + 1),
+            self.accel,
+            name=f"cycle {self.cycle_index}",
+        )
+
+
+class TruthWriter:
+    """Appends each cycle's ground truth to a JSON-lines file (one object per cycle)."""
+
+    def __init__(self, path: str | Path):
+        self.file = open(path, "a", encoding="utf-8")  # noqa: SIM115 (closed by close())
+
+    def __call__(self, rec: CycleTruth) -> None:
+        self.file.write(
+            json.dumps(
+                {
+                    "cycle": rec.cycle_index,
+                    "start_time_s": rec.start_time_s,
+                    "frequency_hz": rec.frequency_hz,
+                    "table_seq": rec.table_seq,
+                    "amplitude_scale": rec.amplitude_scale,
+                    "accel_re": rec.accel.real.round(7).tolist(),
+                    "accel_im": rec.accel.imag.round(7).tolist(),
+                    "current_peak_a": rec.current_peak_a.round(6).tolist(),
+                }
+            )
+            + "\n"
+        )
+        self.file.flush()
+
+    def close(self) -> None:
+        self.file.close()
+
+
+__all__ = ["CycleTruth", "TruthWriter"]

@@ -44,6 +44,7 @@ from ppod_ros.device.schema import (
 )
 from ppod_ros.device.schema import frozen_array as _frozen
 from ppod_ros.errors import ConfigError
+from ppod_ros.estimation.layout import AccelerometerLayout
 from ppod_ros.motion import MAX_HARMONIC
 
 
@@ -205,50 +206,13 @@ def _timing(f: Fields, heartbeat_period_s: float) -> DeviceTiming:
     return out
 
 
-def _accelerometers(f: Fields, sampling: Fields) -> Accelerometers:
-    # Same schema as the feedback side's layout reader: units with one 'axis' or named 'axes'.
-    f.number("max_condition", 1e3, min_value=1.0, exclusive_min=True)
-    f.number("length_scale_m", 0.1, min_value=0.0, exclusive_min=True, unit="m")
-    names, pos, axes = [], [], []
-    for item in f.items("channels"):
-        name = item.string("name")
-        p = item.array("position_m", shape=(3,), unit="m")
-        if item.has("full_scale_mps2"):
-            item.number("full_scale_mps2", min_value=0.0, exclusive_min=True, unit="m/s^2")
-        if item.has("axis") == item.has("axes"):
-            raise ConfigError(f"{item.path}: give exactly one of 'axis' or 'axes'")
-        if item.has("axis"):
-            unit_axes = {"": item.array("axis", shape=(3,))}
-        else:
-            sub = item.sub("axes")
-            raw = item.raw("axes")
-            if not raw:
-                raise ConfigError(f"{item.key_path('axes')}: expected a mapping of suffix to [ex, ey, ez]")
-            unit_axes = {str(s): sub.array(s, shape=(3,)) for s in raw}
-            sub.finish()
-        item.finish()
-        for suffix, e in unit_axes.items():
-            norm = float(np.linalg.norm(e))
-            if abs(norm - 1.0) > 1e-3:
-                raise ConfigError(
-                    f"{item.path}: sensing axis {suffix or name} must be a unit vector, got {e.tolist()}"
-                )
-            names.append(f"{name}.{suffix}" if suffix else name)
-            pos.append(p)
-            axes.append(e / norm)
-    f.finish()
-    if not 6 <= len(names) <= MAX_CHANNELS:
-        raise ConfigError(f"{f.key_path('channels')}: need 6 to {MAX_CHANNELS} channels, got {len(names)}")
-    if len(set(names)) != len(names):
-        raise ConfigError(f"{f.key_path('channels')}: channel names must be unique, got {names}")
-    pos_a, ax_a = np.array(pos), np.array(axes)
-    H = np.hstack([ax_a, np.cross(pos_a, ax_a)])
-    if np.linalg.matrix_rank(H, tol=1e-9) < 6:
-        raise ConfigError(f"{f.path}: the channels cannot determine all six plate-acceleration components")
+def _accelerometers(f: Fields, key: str, sampling: Fields) -> Accelerometers:
+    # One schema for the device and the estimator: AccelerometerLayout reads the channels.
+    layout = AccelerometerLayout.from_dict(f.raw(key), f.key_path(key))
+    if not 6 <= len(layout.names) <= MAX_CHANNELS:
+        raise ConfigError(f"{f.key_path(key)}.channels: need 6 to {MAX_CHANNELS} channels, got {len(layout.names)}")
     out = Accelerometers(
-        names=tuple(names),
-        position_m=_frozen(pos_a),
-        axis=_frozen(ax_a),
+        layout=layout,
         sample_rate_hz=_positive(sampling, "sample_rate_hz", "Hz"),
         noise_mps2=sampling.number("noise_mps2", min_value=0.0, unit="m/s^2"),
         quantisation_mps2=sampling.number("quantisation_mps2", min_value=0.0, unit="m/s^2"),
@@ -294,7 +258,7 @@ def device_config_from_dict(data: Mapping[str, Any], source: str = "") -> Device
         limits=_limits(f.sub("limits"), plate.radius_m, actuators.ambient_temperature_c),
         can=can,
         timing=_timing(f.sub("timing"), can.heartbeat_period_s),
-        accelerometers=_accelerometers(f.sub("accelerometers"), f.sub("accelerometer_sampling")),
+        accelerometers=_accelerometers(f, "accelerometers", f.sub("accelerometer_sampling")),
         sim=_sim(f.sub("sim")),
         source=source,
     )

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ppod_ros.errors import ConfigError
+from ppod_ros.estimation.layout import AccelerometerLayout
 
 NUM_ACTUATORS = 6
 #: The CAN protocol addresses channels with 4 bits and averages at most 16 cycles per summary.
@@ -137,31 +138,41 @@ class DeviceTiming:
 
 @dataclass(frozen=True, eq=False)
 class Accelerometers:
-    """Single-axis accelerometer channels fixed in the plate, in protocol channel order.
+    """The plate's accelerometer channels and how the device samples them.
 
     Attributes
     ----------
-    names : tuple of str, length C
-    position_m : ndarray, shape (C, 3)
-        Channel positions in the plate frame (m).
-    axis : ndarray, shape (C, 3)
-        Unit sensing axes in the plate frame.
+    layout : AccelerometerLayout
+        Single-axis channels in protocol channel order (positions, unit sensing axes, names), the
+        same object the estimator uses (``ppod_ros.estimation.layout``).
     sample_rate_hz, noise_mps2, quantisation_mps2, ac_coupling_hz : float
         Nominal sample rate (the device locks an integer number of samples to each cycle), white
         noise standard deviation per sample, ADC step and the AC-coupling high-pass corner.
     """
 
-    names: tuple[str, ...]
-    position_m: np.ndarray
-    axis: np.ndarray
+    layout: AccelerometerLayout
     sample_rate_hz: float
     noise_mps2: float
     quantisation_mps2: float
     ac_coupling_hz: float
 
     @property
+    def names(self) -> tuple[str, ...]:
+        return self.layout.names
+
+    @property
+    def position_m(self) -> np.ndarray:
+        """(C, 3) channel positions in the plate frame (m)."""
+        return self.layout.position_m
+
+    @property
+    def axis(self) -> np.ndarray:
+        """(C, 3) unit sensing axes in the plate frame."""
+        return self.layout.axis
+
+    @property
     def num_channels(self) -> int:
-        return len(self.names)
+        return len(self.layout.names)
 
 
 @dataclass(frozen=True)

@@ -2,13 +2,13 @@
 
 import numpy as np
 import pytest
-from device_reference_plant import reference_run
 
 from ppod_ros.actuation.harmonics import analyze, synthesize
 from ppod_ros.actuation.plant import NominalPlant
 from ppod_ros.device import default_device_config
 from ppod_ros.motion import PlateMotion
 from ppod_sim.plant import PlantSimulator, foh_discretise
+from tests.device.device_reference_plant import reference_run
 
 CFG = default_device_config()
 PLANT = NominalPlant(CFG)

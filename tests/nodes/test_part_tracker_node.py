@@ -23,10 +23,10 @@ def _image_msg(image: np.ndarray, stamp_s: float, encoding: str = "mono8"):
 
 
 def test_tracker_node_reports_rendered_poses_and_skips_bad_frames(ros):
+    from ppod_msgs.msg import PartPoseArray
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import Image
 
-    from ppod_msgs.msg import PartPoseArray
     from ppod_nodes.common import qos, topics
     from ppod_nodes.part_tracker import PartTrackerNode
     from ppod_ros.vision import CameraConfig, load_tracker_config

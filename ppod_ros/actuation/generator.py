@@ -1,0 +1,242 @@
+"""The waveform generator's logic, without ROS: goals and corrections in, CAN tables out.
+
+:class:`WaveformGenerator` sits between whoever asks for plate motions (the ``waveform_generator``
+node, scripts, tests) and a :class:`~ppod_ros.can.host.DeviceLink`:
+
+* :meth:`submit` validates a goal with the :class:`~ppod_ros.actuation.planning.GoalPlanner` (every
+  device limit) and sends its current table, ramped, only if it passes; a rejection names the limit
+  and nothing reaches the bus. ``dry_run`` validates and predicts without sending.
+* :meth:`apply_correction` adds a feedback correction (per actuator and harmonic, amperes) to the
+  active goal's feed-forward table, clipped in step size and scaled back before any actuator
+  limit by the planner, and crossfades it in (never a step on the coils).
+* :meth:`stop`, :meth:`estop`, :meth:`reset_estop`, :meth:`ramp_down_and_disable`: the ways down.
+* :meth:`state` derives the generator's state from what the device reports (its STATUS frames),
+  not from what was asked: ACTIVE only once the device plays the goal at full amplitude.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+from ppod_ros.actuation.corrections import CorrectionResult
+from ppod_ros.actuation.planning import GoalPlan, GoalPlanner
+from ppod_ros.can.host import DeviceLink
+from ppod_ros.can.protocol import DeviceState
+from ppod_ros.errors import ConfigError, DeviceError, LimitError
+from ppod_ros.motion import PlateMotion
+
+
+class GeneratorState(IntEnum):
+    """Same numbering as ppod_msgs/PlateMotionStatus."""
+
+    IDLE = 0
+    RAMPING = 1
+    ACTIVE = 2
+    STOPPING = 3
+    REJECTED = 4
+    FAULT = 5
+
+
+@dataclass(frozen=True)
+class GoalOutcome:
+    """The answer to a goal: accepted (with its plan) or rejected with the reason and the limit."""
+
+    accepted: bool
+    reason: str = ""
+    limit: str = ""
+    limit_value: float = math.nan
+    requested: float = math.nan
+    plan: GoalPlan | None = None
+    seq: int | None = None
+    dry_run: bool = False
+
+    @classmethod
+    def rejected(cls, exc: Exception) -> GoalOutcome:
+        if isinstance(exc, LimitError):
+            return cls(False, str(exc), exc.limit, exc.limit_value, exc.requested)
+        return cls(False, str(exc))
+
+
+@dataclass(frozen=True)
+class CorrectionOutcome:
+    applied: bool
+    reason: str = ""
+    result: CorrectionResult | None = None
+    seq: int | None = None
+
+
+@dataclass
+class _Active:
+    plan: GoalPlan
+    seqs: set[int] = field(default_factory=set)
+    correction_a: np.ndarray | None = None  # applied correction (K, 6), A
+    reached: bool = False  # the device has played it at full amplitude
+
+
+class WaveformGenerator:
+    """See the module docstring. Thread-safe: goals, corrections and status may come from threads.
+
+    Parameters
+    ----------
+    link : DeviceLink
+        An open, handshaken link (its receive side polled by a thread or by the caller).
+    planner : GoalPlanner
+    """
+
+    def __init__(self, link: DeviceLink, planner: GoalPlanner):
+        self.link = link
+        self.planner = planner
+        self.config = planner.config
+        self._lock = threading.RLock()
+        self._active: _Active | None = None
+        self._stop_seq: int | None = None
+        self.last_rejection: GoalOutcome | None = None
+
+    # ------------------------------------------------------------------ goals
+    def submit(self, motion: PlateMotion, dry_run: bool = False) -> GoalOutcome:
+        """Validate ``motion`` against every device limit; unless ``dry_run``, send it ramped."""
+        try:
+            plan = self.planner.plan(motion)
+        except (LimitError, ConfigError) as exc:
+            outcome = GoalOutcome.rejected(exc)
+            self.last_rejection = outcome
+            return outcome
+        if dry_run:
+            return GoalOutcome(True, plan=plan, dry_run=True)
+        with self._lock:
+            state = self.link.status.state
+            if state in (DeviceState.ESTOP, DeviceState.FAULT):
+                outcome = GoalOutcome(False, f"device is in {state.name}: reset it before sending goals "
+                                             f"({', '.join(self.link.status.fault_names) or 'no fault flags'})")
+                self.last_rejection = outcome
+                return outcome
+            if state not in (DeviceState.ENABLED, DeviceState.RAMPING):
+                self.link.enable()  # disabled, after a watchdog trip, or not reported yet
+            seq = self.link.send_plan(plan)
+            self._active = _Active(plan, {seq}, np.zeros_like(plan.currents_a))
+            self._stop_seq = None
+        return GoalOutcome(True, plan=plan, seq=seq)
+
+    @property
+    def active_plan(self) -> GoalPlan | None:
+        with self._lock:
+            return None if self._active is None else self._active.plan
+
+    @property
+    def applied_correction_a(self) -> np.ndarray | None:
+        with self._lock:
+            return None if self._active is None else self._active.correction_a.copy()
+
+    # ------------------------------------------------------------------ corrections
+    def apply_correction(self, goal_key: bytes | None, k: np.ndarray, table_a: np.ndarray,
+                         absolute: bool = True) -> CorrectionOutcome:
+        """Apply a correction (harmonics ``k``, (len(k), 6) complex amperes) to the active goal.
+
+        ``goal_key`` (a ``PlateMotion.key``) must name the active goal (None: whatever is active), so a
+        correction learned for another goal is never applied. ``absolute`` replaces the correction
+        table; otherwise ``table_a`` is added to it.
+        """
+        with self._lock:
+            act = self._active
+            if act is None:
+                return CorrectionOutcome(False, "no active goal")
+            if goal_key is not None and goal_key != act.plan.motion.key:
+                return CorrectionOutcome(False, "correction is for another goal")
+            k = np.asarray(k, dtype=int)
+            table = np.asarray(table_a, dtype=complex)
+            K = act.plan.currents_a.shape[0]
+            if table.shape != (k.size, 6) or np.any(k < 1) or np.any(k > K):
+                return CorrectionOutcome(False, f"correction must be (len(k), 6) with k in 1..{K}; got "
+                                                f"{table.shape} for k = {k.tolist()}")
+            target = table if absolute else act.correction_a[k - 1] + table
+            try:
+                result = self.planner.correct(act.plan, target, previous=act.correction_a, k=k)
+            except (ConfigError, LimitError) as exc:
+                return CorrectionOutcome(False, str(exc))
+            seq = self.link.send_correction(act.plan, result)
+            act.seqs.add(seq)
+            act.correction_a = result.applied_a
+            notes = []
+            if result.step_clipped:
+                notes.append(f"step clipped to limits.correction_step_a = {self.config.limits.correction_step_a:g} A")
+            if result.limited_by:
+                notes.append(f"scaled by {result.scale:.3f} to stay within {result.limited_by}")
+            return CorrectionOutcome(True, "; ".join(notes), result, seq)
+
+    # ------------------------------------------------------------------ the ways down
+    def stop(self, ramp_s: float | None = None) -> int:
+        """Ramp the plate to rest (device stays enabled); returns the stop table's sequence number."""
+        with self._lock:
+            freq = None if self._active is None else self._active.plan.frequency_hz
+            self._active = None
+            self._stop_seq = self.link.stop_motion(ramp_s, freq)
+            return self._stop_seq
+
+    def estop(self) -> None:
+        """Emergency stop: the top-priority frame; the device latches ESTOP."""
+        with self._lock:
+            self._active = None
+            self.link.estop()
+
+    def reset_estop(self) -> None:
+        with self._lock:
+            self.link.reset_estop()
+            self.link.clear_faults()
+
+    def at_rest(self) -> bool:
+        """True when the device plays nothing: disabled, tripped, or the stop table fully ramped."""
+        s = self.link.status
+        if s.state in (DeviceState.DISABLED, DeviceState.WATCHDOG, DeviceState.ESTOP, DeviceState.FAULT):
+            return True
+        return self._stop_seq is not None and s.active_seq == self._stop_seq and s.amplitude_scale >= 1.0
+
+    def ramp_down_and_disable(self, timeout_s: float, heartbeat: bool = True) -> bool:
+        """Stop, wait (sending heartbeats) until the device reports rest, then disable and wait for it.
+
+        Returns True if the device reported rest and then DISABLED within ``timeout_s``. A device
+        that does not answer ramps itself down on its watchdog when the heartbeats stop.
+        """
+        period = self.config.can.heartbeat_period_s
+        deadline = self.link.clock() + timeout_s
+
+        def wait(predicate) -> bool:
+            while self.link.clock() < deadline:
+                if heartbeat:
+                    self.link.heartbeat()
+                if self.link.wait_for(predicate, period):
+                    return True
+            return False
+
+        try:
+            self.stop()
+            rested = wait(self.at_rest)
+            # Already at rest: the disable needs no more than the device's minimum ramp.
+            self.link.disable(self.config.timing.min_ramp_s if rested else None)
+            return wait(lambda: self.link.status.state == DeviceState.DISABLED) and rested
+        except DeviceError:
+            return False
+
+    # ------------------------------------------------------------------ state
+    def state(self) -> tuple[GeneratorState, str, float]:
+        """(state, reason, ramp progress 0..1) from the device's last STATUS."""
+        s = self.link.status
+        with self._lock:
+            if s.state in (DeviceState.ESTOP, DeviceState.FAULT, DeviceState.WATCHDOG):
+                faults = ", ".join(s.fault_names)
+                return GeneratorState.FAULT, f"device {s.state.name}{': ' + faults if faults else ''}", 0.0
+            act = self._active
+            if act is None:
+                if self._stop_seq is not None and not self.at_rest():
+                    return GeneratorState.STOPPING, "ramping down", float(s.amplitude_scale)
+                return GeneratorState.IDLE, "", 1.0
+            playing = s.active_seq in act.seqs
+            if playing and s.amplitude_scale >= 1.0:
+                act.reached = True
+            if act.reached:
+                return GeneratorState.ACTIVE, "", 1.0
+            return GeneratorState.RAMPING, "", float(s.amplitude_scale) if playing else 0.0

@@ -1,0 +1,136 @@
+"""WaveformGenerator (ROS-free): goals, corrections and the ways down, against the simulated device."""
+
+import itertools
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from ppod_ros.actuation.generator import GeneratorState, WaveformGenerator
+from ppod_ros.actuation.planning import GoalPlanner
+from ppod_ros.can import DeviceLink, DeviceState, open_bus
+from ppod_ros.device import default_device_config
+from ppod_ros.motion import PlateMotion
+from ppod_sim.device import SimDevice
+
+_channels = itertools.count()
+LINESINKX = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0], name="LineSinkX",
+                               ramp_time_s=0.1)
+
+
+@pytest.fixture
+def rig():
+    config = default_device_config().with_can(interface="virtual", channel=f"test-gen-{next(_channels)}")
+    dev_bus, host_bus, spy = open_bus(config.can), open_bus(config.can), open_bus(config.can)
+    device = SimDevice(config, dev_bus, seed=1)
+    link = DeviceLink(host_bus, config)
+    gen = WaveformGenerator(link, GoalPlanner(config))
+    yield config, device, link, gen, spy
+    for bus in (dev_bus, host_bus, spy):
+        bus.shutdown()
+
+
+def run(device, link, seconds):
+    end = device.time_s + seconds
+    while device.time_s < end - 1e-9:
+        link.heartbeat()
+        device.advance(0.05)
+        link.poll()
+
+
+def drain(bus) -> list:
+    out = []
+    while (msg := bus.recv(0.0)) is not None:
+        out.append(msg)
+    return out
+
+
+def test_an_accepted_goal_ramps_then_becomes_active_as_reported_by_the_device(rig):
+    _, device, link, gen, _ = rig
+    out = gen.submit(LINESINKX)
+    assert out.accepted and out.seq is not None and out.plan is not None
+    run(device, link, 0.06)
+    state, _, progress = gen.state()
+    assert state == GeneratorState.RAMPING and 0.0 <= progress < 1.0
+    run(device, link, 0.4)
+    assert gen.state()[0] == GeneratorState.ACTIVE
+    truth = device.last_truth()
+    assert truth is not None and abs(truth.accel[0, 0]) > 5.0  # the plate really moves
+
+
+def test_over_limit_and_dry_run_goals_send_nothing(rig):
+    _, device, link, gen, spy = rig
+    drain(spy)
+    too_big = PlateMotion.single(30, [200, 0, 0, 0, 0, 0], name="huge")
+    out = gen.submit(too_big)
+    assert not out.accepted and out.limit.startswith("limits.") and out.requested > out.limit_value
+    dry = gen.submit(LINESINKX, dry_run=True)
+    assert dry.accepted and dry.dry_run and dry.plan.prediction.current_peak_a.max() > 0
+    assert drain(spy) == []
+    assert gen.state()[0] == GeneratorState.IDLE
+
+
+def test_corrections_apply_only_to_the_active_goal_and_are_clipped(rig):
+    config, device, link, gen, _ = rig
+    gen.submit(LINESINKX)
+    run(device, link, 0.3)
+    k = np.array([1, 3])
+    small = np.full((2, 6), 0.01 + 0.005j)
+    assert not gen.apply_correction(PlateMotion.single(30, [1, 0, 0, 0, 0, 0]).key, k, small).applied
+    ok = gen.apply_correction(LINESINKX.key, k, small)
+    assert ok.applied and ok.reason == ""
+    np.testing.assert_allclose(gen.applied_correction_a[[0, 2]], small, atol=1e-3)
+    big = np.full((2, 6), 50.0 + 0j)
+    clipped = gen.apply_correction(None, k, big)
+    assert clipped.applied and "clipped" in clipped.reason
+    step = np.abs(gen.applied_correction_a[[0, 2]] - small)
+    assert step.max() <= config.limits.correction_step_a + 1e-3
+    bad = gen.apply_correction(None, np.array([11]), np.zeros((1, 6)))
+    assert not bad.applied and "k in 1.." in bad.reason
+
+
+def test_stop_ramps_to_rest_and_estop_latches_until_reset(rig):
+    _, device, link, gen, _ = rig
+    gen.submit(LINESINKX)
+    run(device, link, 0.3)
+    gen.stop(0.1)
+    run(device, link, 0.02)
+    assert gen.state()[0] == GeneratorState.STOPPING
+    run(device, link, 0.3)
+    assert gen.state()[0] == GeneratorState.IDLE and gen.at_rest()
+    gen.submit(LINESINKX)
+    run(device, link, 0.3)
+    gen.estop()
+    run(device, link, 0.1)
+    state, reason, _ = gen.state()
+    assert state == GeneratorState.FAULT and "ESTOP" in reason
+    refused = gen.submit(LINESINKX)
+    assert not refused.accepted and "ESTOP" in refused.reason
+    gen.reset_estop()
+    run(device, link, 0.1)
+    assert gen.submit(LINESINKX).accepted
+
+
+def test_ramp_down_and_disable_waits_for_rest_while_the_device_runs(rig):
+    _, device, link, gen, _ = rig
+    gen.submit(LINESINKX)
+    run(device, link, 0.3)
+    stop = threading.Event()
+
+    def device_loop():  # the device in real time, in its own thread, as in its own process
+        while not stop.is_set():
+            device.advance(0.005)
+            time.sleep(0.005)
+
+    link.start()
+    thread = threading.Thread(target=device_loop, daemon=True)
+    thread.start()
+    try:
+        assert gen.ramp_down_and_disable(timeout_s=3.0)
+        assert not np.any(device.player.played_table())  # at rest before the disable was sent
+        assert link.wait_for(lambda: link.status.state == DeviceState.DISABLED, 2.0)
+    finally:
+        stop.set()
+        thread.join(2)
+        link.stop()

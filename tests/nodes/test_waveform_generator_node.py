@@ -1,0 +1,134 @@
+"""waveform_generator in-process against the simulated device on a virtual bus."""
+
+import math
+
+import can
+import pytest
+
+from tests.support.sim_thread import SimThread
+
+pytestmark = pytest.mark.ros
+
+LINESINKX = "name: LineSinkX\nfrequency_hz: 30\nramp_time_s: 0.2\nharmonics:\n" \
+            "  - {k: 1, amplitude: [10, 0, 0, 0, 100, 0], phase: [0, 0, 0, 0, 4.71238898, 0]}\n"
+
+
+@pytest.fixture
+def sim():
+    with SimThread() as s:
+        yield s
+
+
+def _node(ros, sim):
+    from rclpy.parameter import Parameter
+
+    from ppod_nodes.waveform_generator import WaveformGeneratorNode
+
+    node = ros.make(WaveformGeneratorNode, parameter_overrides=[
+        Parameter("can_interface", value="virtual"), Parameter("can_channel", value=sim.channel)])
+    node.trigger_configure()
+    assert node.lifecycle_state == "inactive"
+    node.trigger_activate()
+    assert node.lifecycle_state == "active"
+    return node
+
+
+def _request(text, dry_run=False):
+    from ppod_msgs.srv import SetPlateMotion
+
+    from ppod_nodes.common.convert import motion_to_msg
+    from ppod_ros.motion import PlateMotion
+
+    return SetPlateMotion.Request(motion=motion_to_msg(PlateMotion.from_yaml_text(text)), dry_run=dry_run)
+
+
+def test_goal_is_accepted_played_and_ramped_down_on_deactivate(ros, sim):
+    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+    from ppod_msgs.msg import PlateMotionStatus
+    from ppod_msgs.srv import SetPlateMotion
+
+    from ppod_nodes.common import qos, topics
+    from ppod_ros.can import DeviceState
+
+    status = ros.collect(PlateMotionStatus, topics.MOTION_STATUS, qos.LATCHED)
+    active = ros.collect(PlateMotionMsg, topics.ACTIVE_MOTION, qos.LATCHED)
+    node = _node(ros, sim)
+    resp = ros.call(SetPlateMotion, "/" + topics.SET_MOTION, _request(LINESINKX))
+    assert resp.accepted, resp.reason
+    assert len(resp.predicted_current_peak_a) == 6 and max(resp.predicted_current_peak_a) > 0
+    assert resp.contact_margin_mps2 == pytest.approx(9.81 - 100 * 0.08, abs=0.05)
+    assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_ACTIVE for s in status), 5)
+    assert ros.wait_until(lambda: active and active[-1].name == "LineSinkX", 2)
+    truth = sim.device.last_truth()
+    assert abs(truth.accel[0, 0]) == pytest.approx(10, rel=0.3)  # the plate really moves (mismatch on)
+    node.trigger_deactivate()
+    assert node.lifecycle_state == "inactive"
+    assert ros.wait_until(lambda: sim.device.state == DeviceState.DISABLED, 3)
+
+
+def test_bad_goals_are_rejected_with_the_reason_and_nothing_goes_on_the_bus(ros, sim):
+    from ppod_msgs.msg import PlateMotionStatus
+    from ppod_msgs.srv import SetPlateMotion
+
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.convert import motion_to_msg
+    from ppod_ros.can.protocol import Fn
+    from ppod_ros.motion import PlateMotion
+
+    status = ros.collect(PlateMotionStatus, topics.MOTION_STATUS, qos.LATCHED)
+    _node(ros, sim)
+    spy = can.Bus(interface="virtual", channel=sim.channel)
+    try:
+        over = ros.call(SetPlateMotion, "/" + topics.SET_MOTION, _request(LINESINKX.replace("[10, 0, 0, 0, 100, 0]",
+                                                                                            "[10, 0, 0, 0, 400, 0]")))
+        # alpha_y = 400 rad/s^2 lifts parts off inside the working disc: the contact-margin limit.
+        assert not over.accepted and over.limit == "limits.contact_margin_mps2"
+        assert over.requested_value < over.limit_value and over.limit in over.reason
+        nan = _request(LINESINKX)
+        nan.motion.harmonics[0].amplitude[0] = math.nan
+        resp = ros.call(SetPlateMotion, "/" + topics.SET_MOTION, nan)
+        assert not resp.accepted and "amplitude" in resp.reason
+        neg = _request(LINESINKX)
+        neg.motion.frequency_hz = -30.0
+        resp = ros.call(SetPlateMotion, "/" + topics.SET_MOTION, neg)
+        assert not resp.accepted and "frequency_hz" in resp.reason
+        many = motion_to_msg(PlateMotion(30, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10], [[0.1, 0, 0, 0, 0, 0]] * 10,
+                                         [[0.0] * 6] * 10))
+        many.harmonics.append(many.harmonics[0].__class__(k=11))
+        resp = ros.call(SetPlateMotion, "/" + topics.SET_MOTION, SetPlateMotion.Request(motion=many))
+        assert not resp.accepted and "1..10" in resp.reason
+        # Every frame the spy saw during the four rejections: none of them a table frame.
+        seen = []
+        while (m := spy.recv(0.0)) is not None:
+            seen.append(m.arbitration_id >> 4)
+        assert seen, "the spy should at least see the device's status and the host's heartbeats"
+        assert not set(seen) & {Fn.TABLE_HEADER, Fn.TABLE_ENTRY, Fn.TABLE_COMMIT}
+    finally:
+        spy.shutdown()
+    assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_REJECTED and s.limit for s in status), 2)
+
+
+def test_emergency_stop_service_works_before_configure_and_when_active(ros, sim):
+    from rclpy.parameter import Parameter
+    from std_srvs.srv import Trigger
+
+    from ppod_nodes.common import topics
+    from ppod_nodes.waveform_generator import WaveformGeneratorNode
+    from ppod_ros.can import DeviceState
+
+    node = ros.make(WaveformGeneratorNode, parameter_overrides=[
+        Parameter("can_interface", value="virtual"), Parameter("can_channel", value=sim.channel)])
+    resp = ros.call(Trigger, "/" + topics.ESTOP, Trigger.Request())
+    assert resp.success, resp.message
+    assert ros.wait_until(lambda: sim.device.state == DeviceState.ESTOP, 2)
+    ros.call(Trigger, "/ppod/reset_emergency_stop", Trigger.Request())  # not configured: refused politely
+    node.trigger_configure()
+    node.trigger_activate()
+    assert ros.call(Trigger, "/ppod/reset_emergency_stop", Trigger.Request()).success
+    assert ros.wait_until(lambda: sim.device.state == DeviceState.DISABLED, 2)
+    from ppod_msgs.srv import SetPlateMotion
+
+    assert ros.call(SetPlateMotion, "/" + topics.SET_MOTION, _request(LINESINKX)).accepted
+    assert ros.wait_until(lambda: sim.device.state in (DeviceState.ENABLED, DeviceState.RAMPING), 2)
+    assert ros.call(Trigger, "/" + topics.ESTOP, Trigger.Request()).success
+    assert ros.wait_until(lambda: sim.device.state == DeviceState.ESTOP, 2)

@@ -22,6 +22,6 @@ for _name, _where in MAPPED.items():
 setup(
     packages=packages,
     package_dir={**MAPPED, "ppod_ros": "ppod_ros"},
-    package_data={"ppod_ros": ["data/*.yaml"], "ppod_nodes": ["data/*.yaml", "data/*.py"],
+    package_data={"ppod_ros": ["data/*.yaml", "data/motions/*.yaml"], "ppod_nodes": ["data/*.yaml", "data/*.py"],
                   "ppod_sim": ["data/*.yaml"]},
 )

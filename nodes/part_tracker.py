@@ -16,6 +16,8 @@ rejected frames by reason.
 from __future__ import annotations
 
 import time
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 from geometry_msgs.msg import Pose2D
@@ -39,6 +41,11 @@ from ppod_ros.vision import (
     load_tracker_config,
     open_source,
 )
+
+
+def default_tracker_config_path() -> Path:
+    return Path(str(resources.files("ppod_ros") / "data" / "tracker.yaml"))
+
 
 _ENCODINGS = {"mono8": 1, "bgr8": 3, "rgb8": 3}
 
@@ -83,7 +90,8 @@ def result_to_msg(result: TrackResult, frame_index: int, latency_s: float) -> Pa
 class PartTrackerNode(PpodLifecycleNode):
     PARAMS = (
         Param("camera_config", "", "camera YAML (CameraConfig); empty: the simulated device's camera"),
-        Param("tracker_config", "", "tracker YAML: part types (label, footprint or part, height_m) and settings"),
+        Param("tracker_config", "", "tracker YAML: part types (label, footprint or part, height_m) and "
+              "settings; empty: the packaged list of the simulated device's parts"),
         Param("source", "topic", "where frames come from", choices=("topic", "capture", "file")),
         Param("source_uri", "", "camera index or URL (capture), recording path (file)"),
         Param("source_fps", 10.0, "frame rate for capture/file sources (Hz)", min_value=0.1, max_value=200.0),
@@ -105,9 +113,7 @@ class PartTrackerNode(PpodLifecycleNode):
     # ------------------------------------------------------------------ lifecycle
     def on_configure_node(self, params):
         camera = CameraConfig.from_yaml(params["camera_config"]) if params["camera_config"] else CameraConfig()
-        if not params["tracker_config"]:
-            raise ConfigError("parameter tracker_config: give the tracker YAML listing the part types to track")
-        specs, settings = load_tracker_config(params["tracker_config"])
+        specs, settings = load_tracker_config(params["tracker_config"] or default_tracker_config_path())
         self._tracker = PartTracker(camera, specs, settings)
         if params["source"] != "topic":
             uri = params["source_uri"]

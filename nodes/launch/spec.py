@@ -10,7 +10,8 @@ Example (the packaged default is ``nodes/data/ppod_up.yaml``)::
         module: ppod_nodes.waveform_generator   # started as `python -m MODULE --ros-args ...`
         lifecycle: true                          # the launcher configures and activates it
         params: {heartbeat_period_s: 0.05}       # node parameters (nested keys allowed)
-        sim_params: {can_interface: remote}      # merged over params with --sim
+        sim_params: {can_channel: "ws://127.0.0.1:{sim_port}/"}  # merged over params with --sim;
+                                                 # {sim_port}: a free port the launcher picks
         hardware_params: {can_interface: socketcan}  # merged over params without --sim
         when: always                              # always | sim | hardware
         required: true                            # its death stops everything (default true)
@@ -44,9 +45,14 @@ class NodeSpec:
     def enabled(self, sim: bool) -> bool:
         return self.when == "always" or (self.when == "sim") == sim
 
-    def parameters(self, sim: bool) -> dict[str, Any]:
+    def parameters(self, sim: bool, substitutions: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The node's parameters for this mode, with ``{name}`` placeholders filled in.
+
+        A value that is exactly ``"{name}"`` takes the substitution's own type (``port: "{sim_port}"``
+        becomes an integer); placeholders inside longer strings are formatted in.
+        """
         merged = deep_merge(self.params, self.sim_params if sim else self.hardware_params)
-        return merged
+        return _substitute(merged, substitutions or {})
 
 
 @dataclass(frozen=True)
@@ -66,6 +72,19 @@ class LaunchSpec:
                 raise ConfigError(f"--only: no node named {', '.join(unknown)} in {self.origin}")
             nodes = [n for n in nodes if n.name in only]
         return nodes
+
+
+def _substitute(value: Any, subs: dict[str, Any]) -> Any:
+    if isinstance(value, dict):
+        return {k: _substitute(v, subs) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_substitute(v, subs) for v in value]
+    if isinstance(value, str) and "{" in value:
+        for name, sub in subs.items():
+            if value == "{" + name + "}":
+                return sub
+            value = value.replace("{" + name + "}", str(sub))
+    return value
 
 
 def deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:

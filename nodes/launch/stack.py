@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import threading
 import time
 from dataclasses import replace
@@ -47,7 +48,8 @@ class Stack:
             if key in self.env:
                 os.environ[key] = self.env[key]
         os.environ.pop("ROS_LOCALHOST_ONLY", None)
-        self.supervisor = Supervisor(self.env, sim, out=out, log_dir=log_dir)
+        self.substitutions = {"sim_port": free_port()}
+        self.supervisor = Supervisor(self.env, sim, out=out, log_dir=log_dir, substitutions=self.substitutions)
         self.stop_event = threading.Event()
         self.failed: list[str] = []
         self._lifecycle = None
@@ -155,6 +157,13 @@ class Stack:
                             "still running: " + ", ".join(c.spec.name for c in left))
         self.supervisor.close()
         return clean and not left
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free now (for the simulator's CAN bridge)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
 
 
 def _with_params(node: NodeSpec, extra: dict) -> NodeSpec:

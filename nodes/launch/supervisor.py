@@ -75,7 +75,7 @@ class Supervisor:
     """
 
     def __init__(self, env: dict[str, str], sim: bool, out: IO[str] | None = None, log_dir: Path | None = None,
-                 color: bool | None = None, keep_lines: int = 200):
+                 color: bool | None = None, keep_lines: int = 200, substitutions: dict | None = None):
         self.env = env
         self.sim = sim
         self.out = out or sys.stdout
@@ -85,6 +85,7 @@ class Supervisor:
         self._tmp = Path(tempfile.mkdtemp(prefix="ppod-up-"))
         self._lock = threading.Lock()
         self._keep = keep_lines
+        self.substitutions = substitutions or {}
 
     # ------------------------------------------------------------------ output
     def say(self, text: str) -> None:
@@ -110,7 +111,7 @@ class Supervisor:
     # ------------------------------------------------------------------ start
     def start(self, spec: NodeSpec) -> Child:
         params_file = self._tmp / f"{spec.name}.yaml"
-        params_file.write_text(params_file_text(spec.name, spec.parameters(self.sim)))
+        params_file.write_text(params_file_text(spec.name, spec.parameters(self.sim, self.substitutions)))
         cmd = [sys.executable, "-u", "-m", spec.module, *spec.args, "--ros-args", "-r", f"__node:={spec.name}",
                "--params-file", str(params_file)]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,

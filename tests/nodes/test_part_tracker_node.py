@@ -32,7 +32,7 @@ def test_tracker_node_reports_rendered_poses_and_skips_bad_frames(ros):
     from ppod_ros.vision import CameraConfig, load_tracker_config
     from ppod_sim.camera import CameraRenderer, RenderPart
 
-    specs, _ = load_tracker_config(ROOT / "config" / "tracker.yaml")
+    specs, _ = load_tracker_config(ROOT / "ppod_ros" / "data" / "tracker.yaml")
     by_label = {s.label: s for s in specs}
     renderer = CameraRenderer(CameraConfig(), seed=3)
     truth = {"pin": (0.03, -0.02, 0.4), "washer": (-0.05, 0.04, 0.0), "tab": (0.0, 0.06, -1.0)}
@@ -40,7 +40,7 @@ def test_tracker_node_reports_rendered_poses_and_skips_bad_frames(ros):
     got = ros.collect(PartPoseArray, topics.PART_POSES, qos.STREAM)
     pub = ros.helper.create_publisher(Image, topics.IMAGE, qos.SENSOR_DATA)
     node = ros.make(PartTrackerNode, parameter_overrides=[
-        Parameter("tracker_config", value=str(ROOT / "config" / "tracker.yaml"))])
+        Parameter("tracker_config", value=str(ROOT / "ppod_ros" / "data" / "tracker.yaml"))])
     node.trigger_configure()
     node.trigger_activate()
     assert node.lifecycle_state == "active"
@@ -76,9 +76,13 @@ def test_tracker_node_reports_rendered_poses_and_skips_bad_frames(ros):
     assert node._rejected == {"encoding": 1}
 
 
-def test_tracker_node_without_a_part_list_fails_configure_naming_the_parameter(ros):
+def test_tracker_node_with_a_bad_part_list_fails_configure_naming_the_problem(ros, tmp_path):
+    from rclpy.parameter import Parameter
+
     from ppod_nodes.part_tracker import PartTrackerNode
 
-    node = ros.make(PartTrackerNode)
+    bad = tmp_path / "tracker.yaml"
+    bad.write_text("parts:\n  - {label: washer, footprint: {disk: -1}}\n")
+    node = ros.make(PartTrackerNode, parameter_overrides=[Parameter("tracker_config", value=str(bad))])
     node.trigger_configure()
     assert node.lifecycle_state == "unconfigured"

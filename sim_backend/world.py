@@ -1,0 +1,181 @@
+"""The simulated world without ROS: the device, the parts on its plate, and the triggered camera.
+
+:class:`SimWorld` wires three simulations together on the device's clock:
+
+* the device (:class:`~ppod_sim.process.SimProcess`: firmware, plant, accelerometers, CAN bridge);
+* the parts (:class:`~ppod_ros.physics.PartDynamics`): after every completed plate cycle they are
+  advanced over that cycle with the plate's *actual* motion in it (``CycleTruth.motion()``, ramps and
+  mismatch included), then kept out of each other (:func:`~ppod_sim.scene.separate`); a part whose
+  centre leaves the plate falls off and is no longer simulated;
+* the camera: a frame ticks every 1/fps of device time and is exposed at the first cycle start after
+  the tick (a triggered camera: same plate phase every frame), with the parts' poses at that instant.
+  Rendering runs in its own thread, only while ``camera_enabled`` is set (someone subscribes).
+
+Listeners get every cycle (``on_cycle(truth, parts)``), every frame tick (``on_tick(stamp_s, parts)``,
+with or without a camera: ground truth at the frame rate) and every rendered frame
+(``on_frame(frame, parts)``).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ppod_ros.device.config import DeviceConfig
+from ppod_ros.physics import DynamicsState, PartDynamics, SolverSettings
+from ppod_ros.vision.camera import CameraConfig
+from ppod_sim.camera import CameraRenderer, RenderedFrame, RenderPart
+from ppod_sim.process import SimProcess
+from ppod_sim.scene import Scene, separate
+from ppod_sim.truth import CycleTruth
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PartsTruth:
+    """The parts at one instant: poses (N, 3), twists (N, 3), on the plate, contact lost."""
+
+    time_s: float
+    poses: np.ndarray
+    twists: np.ndarray
+    on_plate: np.ndarray
+    contact_lost: np.ndarray
+
+
+class SimWorld:
+    """See the module docstring.
+
+    Parameters
+    ----------
+    config : DeviceConfig
+    scene : Scene
+    camera : CameraConfig or None
+        None: no camera.
+    port, rate, seed : see :class:`~ppod_sim.process.SimProcess` (seed defaults to the scene's).
+    plate_half_size_m : float
+        Parts whose centre leaves the square |x|, |y| <= this fall off the plate.
+    separation_gap_m : float
+        Clearance kept between parts' bounding circles.
+    tick_fps : float
+        Frame-tick rate without a camera (with one, the camera's fps).
+    """
+
+    def __init__(self, config: DeviceConfig, scene: Scene, camera: CameraConfig | None = None, *,
+                 port: int = 0, rate: float = 1.0, seed: int | None = None, plate_half_size_m: float = 0.175,
+                 separation_gap_m: float = 0.002, solver: SolverSettings | None = None, channel: str | None = None,
+                 tick_fps: float = 10.0):
+        self.scene = scene
+        self.process = SimProcess(config, port=port, rate=rate, seed=scene.seed if seed is None else seed,
+                                  channel=channel)
+        self.device = self.process.device
+        self.dynamics = PartDynamics([p.part for p in scene.parts], scene.poses, settings=solver,
+                                     time_s=self.device.time_s)
+        self.radii = scene.radii_m
+        self.on_plate = np.ones(len(scene.parts), bool)
+        self.half_size = plate_half_size_m
+        self.gap = separation_gap_m
+        self.on_cycle: list[Callable[[CycleTruth, PartsTruth], None]] = []
+        self.on_frame: list[Callable[[RenderedFrame, PartsTruth], None]] = []
+        self.on_tick: list[Callable[[float, PartsTruth], None]] = []
+        self.camera_enabled = threading.Event()
+        self.renderer = None if camera is None else CameraRenderer(camera, seed=scene.seed)
+        self.fps = camera.fps if camera is not None else tick_fps
+        self._next_tick_s = self.device.time_s
+        self._frames: queue.Queue = queue.Queue(maxsize=2)
+        self.frames_dropped = 0
+        self.frames_rendered = 0
+        self.physics_s = 0.0
+        self._lock = threading.Lock()
+        self._truth = self._snapshot(self.dynamics.state)
+        self._render_thread: threading.Thread | None = None
+        self._stop_render = threading.Event()
+        self.device.cycle_callbacks.append(self._cycle)
+
+    @property
+    def url(self) -> str:
+        return self.process.url
+
+    # ------------------------------------------------------------------ per cycle
+    def _snapshot(self, state: DynamicsState) -> PartsTruth:
+        return PartsTruth(state.time_s, state.configurations.copy(), state.twists.copy(), self.on_plate.copy(),
+                          state.contact_lost.copy())
+
+    def parts_truth(self) -> PartsTruth:
+        with self._lock:
+            return self._truth
+
+    def _cycle(self, truth: CycleTruth) -> None:
+        start, period = truth.start_time_s, 1.0 / truth.frequency_hz
+        if self.fps > 0 and start >= self._next_tick_s - 1e-9:
+            while self._next_tick_s <= start + 1e-9:
+                self._next_tick_s += 1.0 / self.fps
+            for cb in self.on_tick:
+                cb(start, self._truth)
+            if self.renderer is not None and self.camera_enabled.is_set():
+                self._queue_frame(truth)
+        # The truth's phasors refer to this cycle's start; the dynamics wants absolute device time.
+        motion = truth.motion().time_shifted(-start)
+        t0 = time.perf_counter()
+        state = self.dynamics.advance(motion, start, period)
+        xy, v = state.configurations[:, :2].copy(), state.twists[:, :2].copy()
+        active = self.on_plate & ~state.contact_lost
+        moved = separate(xy, v, self.radii, active, self.gap)
+        for i in moved:
+            self.dynamics.set_part(int(i), [xy[i, 0], xy[i, 1], state.configurations[i, 2]],
+                                   [v[i, 0], v[i, 1], state.twists[i, 2]])
+        off = self.on_plate & (np.abs(xy).max(axis=1) > self.half_size)
+        if np.any(off):
+            for i in np.flatnonzero(off):
+                log.warning("part %d (%s) fell off the plate at (%.3f, %.3f)", i, self.scene.parts[i].label,
+                            *xy[i])
+            self.on_plate &= ~off
+        self.physics_s += time.perf_counter() - t0
+        snap = self._snapshot(self.dynamics.state if moved.size else state)
+        with self._lock:
+            self._truth = snap
+        for cb in self.on_cycle:
+            cb(truth, snap)
+
+    # ------------------------------------------------------------------ camera
+    def _queue_frame(self, truth: CycleTruth) -> None:
+        # Poses at this cycle's start: the state before this cycle's advance.
+        parts = self._truth
+        disp = truth.motion().displacement(0.0)
+        try:
+            self._frames.put_nowait((truth.start_time_s, parts, disp))
+        except queue.Full:
+            self.frames_dropped += 1
+
+    def _render_loop(self) -> None:
+        while not self._stop_render.is_set():
+            try:
+                stamp, parts, disp = self._frames.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            shown = [RenderPart(p.label, p.outline, *parts.poses[i], p.height_m)
+                     for i, p in enumerate(self.scene.parts) if parts.on_plate[i]]
+            frame = self.renderer.render(shown, stamp, plate_displacement=disp)
+            self.frames_rendered += 1
+            for cb in self.on_frame:
+                cb(frame, parts)
+
+    # ------------------------------------------------------------------ running
+    def run(self, stop: threading.Event | None = None, duration_s: float | None = None) -> None:
+        """Run the device (and with it the parts and the camera) until ``stop`` or ``duration_s``."""
+        if self.renderer is not None and self._render_thread is None:
+            self._render_thread = threading.Thread(target=self._render_loop, daemon=True, name="sim-camera")
+            self._render_thread.start()
+        self.process.run(stop, duration_s)
+
+    def close(self) -> None:
+        self._stop_render.set()
+        if self._render_thread is not None:
+            self._render_thread.join(timeout=5)
+        self.process.close()

@@ -1,0 +1,189 @@
+"""The live feedback loop on the device's accelerometer summaries (what ``accel_feedback`` runs).
+
+:class:`FeedbackLoop` turns a stream of per-channel harmonic summaries into 6-DoF estimates and,
+while a goal is active, learning-control corrections:
+
+1. ``set_goal(motion, now_s)``: a new controller for the goal (plant from the nominal model or a
+   stored identification; feed-forward exactly as the waveform generator plans it; a learned
+   correction from the :class:`~ppod_ros.control.store.CorrectionStore` when this goal was learned
+   before). Measurements start after ``settle_s``.
+2. ``on_summary(k, phasors, samples_per_cycle, now_s)``: compensates each channel's AC coupling (a
+   known sensor response), collects ``summaries_per_estimate`` summaries, estimates, and, if the
+   loop controls, updates the correction; then waits ``settle_s`` (the plate's suspension
+   transients after a table change) before measuring again.
+
+No bus access: the caller sends the corrections to the generator, which limits and applies them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ppod_ros.actuation.planning import GoalPlanner
+from ppod_ros.config.fields import Fields
+from ppod_ros.control.learning import DIVERGED, LearningController, LearningSettings
+from ppod_ros.control.limits import DeviceLimits
+from ppod_ros.control.plant import PlantModel
+from ppod_ros.control.store import CorrectionStore
+from ppod_ros.device.schema import DeviceConfig
+from ppod_ros.errors import ConfigError
+from ppod_ros.estimation import AccelEstimator, PlateEstimate
+from ppod_ros.motion import PlateMotion
+
+
+def high_pass_response(freq_hz: np.ndarray, corner_hz: float, dt_s: float) -> np.ndarray:
+    """Response of the discrete first-order AC coupling ``y_n = a (y_{n-1} + x_n - x_{n-1})``.
+
+    ``H(f) = a (1 - z^-1) / (1 - a z^-1)``, ``a = exp(-2 pi f_c dt)``, ``z = exp(i 2 pi f dt)``
+    (docs/device.md): the sensor property the summaries are divided by.
+    """
+    f = np.asarray(freq_hz, dtype=float)
+    if corner_hz <= 0:
+        return np.ones_like(f, dtype=complex)
+    a = math.exp(-2 * math.pi * corner_hz * dt_s)
+    zi = np.exp(-1j * 2 * math.pi * f * dt_s)
+    return a * (1 - zi) / (1 - a * zi)
+
+
+@dataclass(frozen=True)
+class OnlineSettings:
+    """How the live loop samples: summaries per estimate, settling time, whether it controls."""
+
+    summaries_per_estimate: int = 3
+    settle_s: float = 0.6
+    control: bool = True
+    estimator_harmonics: int = 6
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], where: str = "feedback") -> OnlineSettings:
+        f = Fields(data, where)
+        out = cls(
+            summaries_per_estimate=f.integer("summaries_per_estimate", cls.summaries_per_estimate, min_value=1,
+                                             max_value=64),
+            settle_s=f.number("settle_s", cls.settle_s, min_value=0.0, unit="s"),
+            control=f.boolean("control", cls.control),
+            estimator_harmonics=f.integer("estimator_harmonics", cls.estimator_harmonics, min_value=1,
+                                          max_value=10),
+        )
+        f.finish()
+        return out
+
+
+@dataclass
+class LoopOutput:
+    """One estimate, and the control step taken on it (None when not controlling)."""
+
+    estimate: PlateEstimate
+    step: Any = None
+    goal: PlateMotion | None = None
+    stored: bool = False
+
+
+@dataclass
+class _Collect:
+    k: np.ndarray | None = None
+    phasors: list[np.ndarray] = field(default_factory=list)
+
+
+class FeedbackLoop:
+    """See the module docstring.
+
+    Parameters
+    ----------
+    config : DeviceConfig
+        The device (accelerometer layout, AC coupling, limits, the plant for the nominal model).
+    settings : OnlineSettings
+    learning : LearningSettings
+    plant_for : callable(motion, k) -> PlantModel, optional
+        Where the plant comes from (default: the nominal model at the goal's frequency).
+    store : CorrectionStore, optional
+        Learned corrections per goal (kept on convergence, reused for the same goal).
+    """
+
+    def __init__(self, config: DeviceConfig, settings: OnlineSettings | None = None,
+                 learning: LearningSettings | None = None,
+                 plant_for: Callable[[PlateMotion, np.ndarray], PlantModel] | None = None,
+                 store: CorrectionStore | None = None):
+        self.config = config
+        self.settings = settings or OnlineSettings()
+        self.learning = learning or LearningSettings()
+        self.planner = GoalPlanner(config)
+        self.estimator = AccelEstimator(config.accelerometers.layout,
+                                        harmonics=self.settings.estimator_harmonics)
+        self.limits = DeviceLimits(max_current_a=config.limits.coil_current_a,
+                                   max_step_a=config.limits.correction_step_a)
+        self.plant_for = plant_for or self._nominal_plant
+        self.store = store
+        self.goal: PlateMotion | None = None
+        self.controller: LearningController | None = None
+        self._resume_s = math.inf
+        self._collect = _Collect()
+
+    def _nominal_plant(self, motion: PlateMotion, k: np.ndarray) -> PlantModel:
+        return PlantModel.from_response(self.planner.plant.frequency_response, motion.frequency_hz, k)
+
+    # ------------------------------------------------------------------ goals
+    def set_goal(self, motion: PlateMotion | None, now_s: float) -> None:
+        """Start learning ``motion`` (None: no goal; summaries are then only estimated)."""
+        self.goal = motion
+        self._collect = _Collect()
+        self._resume_s = now_s + self.settings.settle_s
+        self.controller = None
+        if motion is None or motion.is_zero() or not self.settings.control:
+            return
+        plan = self.planner.plan(motion)
+        kc = max(self.learning.min_harmonics, int(motion.k.max()))
+        k = np.arange(1, kc + 1)
+        ff = np.zeros((kc, 6), complex)
+        rows = min(kc, plan.currents_a.shape[0])
+        ff[:rows] = plan.currents_a[:rows]
+        initial = None if self.store is None else self.store.initial_for(self.config.name, motion, k)
+        self.controller = LearningController(motion, self.plant_for(motion, k), self.limits, self.learning,
+                                             feedforward_a=ff, initial_correction_a=initial)
+
+    @property
+    def initial_correction_a(self) -> np.ndarray | None:
+        """A stored correction the new controller started from (to send to the generator at once)."""
+        c = self.controller
+        return None if c is None or not np.any(c.correction_a) else c.correction_a.copy()
+
+    # ------------------------------------------------------------------ measurements
+    def compensate(self, k: np.ndarray, phasors: np.ndarray, frequency_hz: float, samples_per_cycle: int
+                   ) -> np.ndarray:
+        """Undo the channels' AC coupling on summary phasors (K, C)."""
+        acc = self.config.accelerometers
+        dt = 1.0 / (frequency_hz * samples_per_cycle)
+        return phasors / high_pass_response(np.asarray(k) * frequency_hz, acc.ac_coupling_hz, dt)[:, None]
+
+    def on_summary(self, k: np.ndarray, phasors: np.ndarray, frequency_hz: float, samples_per_cycle: int,
+                   now_s: float) -> LoopOutput | None:
+        """Feed one summary (harmonics ``k``, phasors (K, C)); returns an output when one is ready."""
+        if now_s < self._resume_s:
+            return None
+        k = np.asarray(k, dtype=int)
+        if frequency_hz <= 0 or not math.isfinite(frequency_hz):
+            raise ConfigError(f"frequency_hz: must be a positive frequency, got {frequency_hz}")
+        if self._collect.k is not None and not np.array_equal(self._collect.k, k):
+            self._collect = _Collect()
+        self._collect.k = k
+        self._collect.phasors.append(self.compensate(k, np.asarray(phasors, complex), frequency_hz,
+                                                     samples_per_cycle))
+        if len(self._collect.phasors) < self.settings.summaries_per_estimate:
+            return None
+        stack = np.stack(self._collect.phasors)
+        self._collect = _Collect()
+        estimate = self.estimator.from_summaries(k, stack, frequency_hz)
+        out = LoopOutput(estimate, goal=self.goal)
+        if self.controller is not None and self.controller.state != DIVERGED:
+            out.step = self.controller.update(estimate)
+            if out.step.converged and self.store is not None:
+                self.store.save(self.config.name, self.goal, out.step.k, self.controller.correction_a)
+                out.stored = True
+            # The next measurement must see the new table, after its crossfade and the plate's transient.
+            self._resume_s = now_s + self.settings.settle_s
+        return out

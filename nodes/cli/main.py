@@ -24,6 +24,7 @@ SUBCOMMANDS: dict[str, str] = {
     "up": "up",
     "demo": "demo",
     "goal": "goal",
+    "estop": "estop",
     "field": "field",
     "echo": "echo",
     "record": "record",
@@ -33,8 +34,9 @@ SUBCOMMANDS: dict[str, str] = {
 
 EPILOG = """examples:
   ppod up --sim                      start every node against the simulated device
-  ppod field config/motions/LineSinkX.yaml --plot field.png
-  ppod goal config/motions/LineSinkX.yaml
+  ppod field ppod_ros/data/motions/LineSinkX.yaml --plot field.png
+  ppod goal --preset LineSinkX
+  ppod estop                         emergency stop: the top-priority frame, straight on the bus
   ppod echo /ppod/plate_motion_status
   ppod SUBCOMMAND --help             details and examples for one subcommand
 """

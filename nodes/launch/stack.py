@@ -19,6 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import IO
 
+from ppod_nodes.launch import runfile
 from ppod_nodes.launch.spec import LaunchSpec, NodeSpec, deep_merge
 from ppod_nodes.launch.supervisor import Supervisor
 from ppod_nodes.ros_env import configure_ros_environment
@@ -88,6 +89,8 @@ class Stack:
                             f"domain {self.env.get('ROS_DOMAIN_ID', '0')}); config {self.spec.origin}")
         for node in self.nodes:
             self.supervisor.start(node)
+        runfile.write({"sim": self.sim, "nodes": [n.name for n in self.nodes],
+                       "sim_bridge": f"ws://127.0.0.1:{self.substitutions['sim_port']}/" if self.sim else None})
         managed = [n for n in self.nodes if n.lifecycle]
         if not (activate and managed):
             return
@@ -152,6 +155,7 @@ class Stack:
             self._lifecycle.close()
             self._lifecycle = None
         clean = self.supervisor.stop_all(self.spec.shutdown_timeout_s)
+        runfile.remove()
         left = self.supervisor.running()
         self.supervisor.say("all children exited" if not left else
                             "still running: " + ", ".join(c.spec.name for c in left))

@@ -6,6 +6,9 @@ Sections (all on this machine, no ROS):
   latency  a two-harmonic goal: plan + encode until the first and the commit frame are on the bus
            (in process, wall clock), and goal to the device's ACCEPTED / ACTIVE acknowledgements
            across processes through the localhost bridge (simulator in real time)
+  node     the waveform_generator node: a two-harmonic goal received on its topic (and by its
+           SetPlateMotion service) until the first frame of its table is on the bus (ROS in process,
+           simulated device on a virtual bus)
   bridge   frames per second the python-can-remote bridge carries from the device to a client
   sim      how much faster than real time the simulated plant and the whole device run
 
@@ -33,7 +36,7 @@ import can
 import numpy as np
 
 HELP = "CAN bus load and goal-to-frame latency (ROS-free path), bridge throughput, simulator speed"
-SECTIONS = ("load", "latency", "bridge", "sim")
+SECTIONS = ("load", "latency", "node", "bridge", "sim")
 _channels = itertools.count()
 
 
@@ -199,6 +202,70 @@ def bench_latency_in_process(args) -> dict:
         "commit_frame": _percentiles(commit),
         "frames_per_goal": frames,
     }
+
+
+def bench_latency_node(args) -> dict:
+    """Goal published to / requested from the waveform_generator node -> its first table frame on the bus."""
+    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+    from ppod_msgs.srv import SetPlateMotion
+    from rclpy.parameter import Parameter
+
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.convert import motion_to_msg
+    from ppod_nodes.common.session import RosSession
+    from ppod_nodes.waveform_generator import WaveformGeneratorNode
+    from ppod_ros.can.protocol import Fn
+    from ppod_ros.device import default_device_config
+    from ppod_sim.process import SimProcess
+
+    channel = f"bench-node-{next(_channels)}"
+    cfg = default_device_config().with_can(interface="virtual", channel=channel)
+    sim = SimProcess(cfg, port=0, rate=1.0, seed=1, channel=channel)
+    stop = threading.Event()
+    sim_thread = threading.Thread(target=sim.run, kwargs={"stop": stop}, daemon=True)
+    sim_thread.start()
+    spy = can.Bus(interface="virtual", channel=channel)
+    goal = dict(_goals())["two harmonics, 30 Hz"]
+    n = 10 if args.quick else max(20, args.repeats // 4)
+    out: dict = {}
+    with RosSession("bench_can") as ros:
+        node = ros.add(WaveformGeneratorNode(context=ros.context, parameter_overrides=[
+            Parameter("can_interface", value="virtual"), Parameter("can_channel", value=channel)]))
+        node.trigger_configure()
+        node.trigger_activate()
+        pub = ros.node.create_publisher(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+        ros.wait_until(lambda: pub.get_subscription_count() > 0, 5.0)
+        client = ros.node.create_client(SetPlateMotion, topics.SET_MOTION)
+        client.wait_for_service(timeout_sec=5.0)
+
+        def first_table_frame(after: float) -> float:
+            deadline = time.time() + 2.0
+            while time.time() < deadline:
+                msg = spy.recv(0.5)
+                if msg is not None and msg.arbitration_id >> 4 == Fn.TABLE_HEADER and msg.timestamp >= after:
+                    return msg.timestamp
+            raise RuntimeError("no table frame within 2 s")
+
+        for path in ("topic", "service"):
+            lat = []
+            for i in range(n):
+                msg = motion_to_msg(goal.scaled(0.9 + 0.001 * i))
+                while spy.recv(0) is not None:
+                    pass
+                t0 = time.time()
+                if path == "topic":
+                    pub.publish(msg)
+                else:
+                    client.call_async(SetPlateMotion.Request(motion=msg))
+                lat.append(first_table_frame(t0) - t0)
+                time.sleep(0.1)
+            out[path] = _percentiles(lat)
+        node.trigger_deactivate()
+    spy.shutdown()
+    stop.set()
+    sim_thread.join(5)
+    sim.close()
+    return out
 
 
 def _start_sim(extra: list[str]) -> tuple[subprocess.Popen, str]:
@@ -439,6 +506,14 @@ def run(args: argparse.Namespace) -> int:
                     ("ACTIVE ack received (next cycle start)", "active"),
                 )
             ],
+        )
+    if "node" in args.sections:
+        node = result["latency_node"] = bench_latency_node(args)
+        _print_table(
+            "Two-harmonic goal through the waveform_generator node (ROS in process, DDS on loopback)",
+            ["goal received by", "median ms", "p99 ms", "n"],
+            [[f"{name} -> first CAN frame of its table", f"{1e3 * node[name]['median']:.2f}",
+              f"{1e3 * node[name]['p99']:.2f}", str(node[name]["n"])] for name in ("topic", "service")],
         )
     if "bridge" in args.sections:
         rows = result["bridge"] = bench_bridge(args)

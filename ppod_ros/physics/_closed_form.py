@@ -26,7 +26,7 @@ from ppod_ros.physics._layout import NOT_CONVERGED, OK
 from ppod_ros.physics.plate import G
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def collinear_direction(mc, x, y):
     """(is_collinear, ex, ey): whether a_h at (x, y) keeps one direction for all t, and that direction."""
     gxx = 0.0
@@ -49,7 +49,7 @@ def collinear_direction(mc, x, y):
     return True, math.cos(ang), math.sin(ang)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def line_table(mc, x, y, ex, ey):
     """Coefficients along e at (x, y): rows [w, alpha(s,c), lambda_v(s,c), Lambda_v(s,c), a_n(s,c),
     v_n(s,c), d_n(s,c)] (13 columns)."""
@@ -69,7 +69,7 @@ def line_table(mc, x, y, ex, ey):
     return c1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def eval_line(c1, t):
     """(alpha, alpha', lambda_v, Lambda_v, n, n', N, M) at t."""
     al = 0.0
@@ -95,7 +95,7 @@ def eval_line(c1, t):
     return al, dal, lv, Lv, n, dn, N, M
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _phi(c1, which, t, lam0, sig, mu, mus, N0):
     """Event function and its derivative: which 0 = sigma F (sliding), 1 = G (sticking)."""
     al, dal, lv, Lv, n, dn, N, M = eval_line(c1, t)
@@ -106,7 +106,7 @@ def _phi(c1, which, t, lam0, sig, mu, mus, N0):
     return mus * mus * n * n - al * al, 2.0 * (mus * mus * n * dn - al * dal)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def first_event(c1, which, t0, t1, dt, lam0, sig, mu, mus, N0):
     """First t in (t0, t1] where phi <= 0 (phi > 0 just after t0), or -1 if none."""
     fa, da = _phi(c1, which, t0, lam0, sig, mu, mus, N0)
@@ -143,7 +143,7 @@ def first_event(c1, which, t0, t1, dt, lam0, sig, mu, mus, N0):
     return -1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _refine(c1, which, lo, hi, lam0, sig, mu, mus, N0):
     """Safeguarded Newton for the first root in [lo, hi] with phi(lo) >= 0 (or lo = t0), phi(hi) <= 0."""
     t = hi
@@ -162,7 +162,7 @@ def _refine(c1, which, lo, hi, lam0, sig, mu, mus, N0):
     return hi
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats):
     """One period from lambda(0) = lam0: returns (lambda(T), integral of lambda, d lambda(T)/d lam0).
     stats[0] += time sticking, stats[2] += events."""
@@ -223,7 +223,7 @@ def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats):
     return lam, integ, dP
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def line_solve(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, tol, max_periods, stats):
     """Newton on the one-period map. Returns (status, average lambda, lambda at the cycle start,
     periods used); stats[0] ends as the sticking time of the last period."""

@@ -5,9 +5,11 @@ where ``q`` is the configuration when it evolves (full dynamics) and the running
 velocity when it is held fixed (asymptotic solver: the cycle average is q(T) / T).
 
 Point part, sliding: ``s' = -mu n(t) w/|w|`` with ``w = s - v_h``. Inside one integration step the
-direction is continued through w = 0 with the sign of ``w . d`` (``d``: the direction at the
-step's start), so that a step which crosses a zero of w is smooth and the crossing can be located
-as an event (see ``_advance.py``). Sticking: ``s' = a_h`` (the part moves with the plate).
+direction is continued: w's component against ``d`` (the direction at the step's start) is
+reflected, which changes nothing while ``w . d >= 0`` and continues a motion through w = 0 along d
+smoothly, and is continuous everywhere; so a step that crosses a zero of w, or swings w round by
+more than 90 degrees, can be located as an event (``w . d = 0``, see ``_advance.py``) and the steps
+up to it stay accurate. Sticking: ``s' = a_h`` (the part moves with the plate).
 
 Rigid part, sliding: the 4x4 system in (thetadot', N1, N2, N3) built from the Newton-Euler
 equations with the friction directions substituted (the translational rows are explicit), solved
@@ -24,9 +26,11 @@ import numpy as np
 from numba import njit
 
 from ppod_ros.physics._layout import (
+    AX_BAND,
     AX_DX,
     AX_DY,
     AX_MODE,
+    AX_RD,
     CONTACT_LOST,
     FRICTIONAL_SINGULARITY,
     OK,
@@ -45,6 +49,7 @@ from ppod_ros.physics._layout import (
     RP_TH,
     RP_X,
     RP_Y,
+    RP_ZTOL,
     STICK,
     W_B,
     W_E,
@@ -64,7 +69,7 @@ from ppod_ros.physics.plate import G, plate_eval
 # reference counting. Stage derivatives go to K[s, :].
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def point_rhs(mc, P, aux, t, y, K, s, W):
     plate_eval(mc, t, W, W_U, W_V)
     if P[PP_EVOLVE] > 0.0:
@@ -84,11 +89,13 @@ def point_rhs(mc, P, aux, t, y, K, s, W):
         wy = y[3] - (W[W_V + 1] + W[W_V + 5] * x)
         nw = math.sqrt(wx * wx + wy * wy)
         if nw > 0.0:
+            # Continued direction: w with its component against d reflected (see the module doc).
+            proj = wx * aux[AX_DX] + wy * aux[AX_DY]
+            if proj < 0.0:
+                wx -= 2.0 * proj * aux[AX_DX]
+                wy -= 2.0 * proj * aux[AX_DY]
             ex = wx / nw
             ey = wy / nw
-            if ex * aux[AX_DX] + ey * aux[AX_DY] < 0.0:
-                ex = -ex
-                ey = -ey
         else:
             ex = aux[AX_DX]
             ey = aux[AX_DY]
@@ -98,7 +105,7 @@ def point_rhs(mc, P, aux, t, y, K, s, W):
     return OK if n > 0.0 else CONTACT_LOST
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def point_plate(mc, P, t, x, y, W):
     """(a_hx, a_hy, n, v_hx, v_hy) at plate point (x, y) and time t."""
     plate_eval(mc, t, W, W_U, W_V)
@@ -110,7 +117,7 @@ def point_plate(mc, P, t, x, y, W):
 # ================================================================ rigid part: geometry and solves
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rigid_geometry(P, th, W):
     """World-frame contact offsets rho (W_RX, W_RY), h (W_H) and inertia R I R^T (W_IW) at yaw th."""
     c = math.cos(th)
@@ -134,7 +141,7 @@ def rigid_geometry(P, th, W):
         W[W_IW + 3 * a + 2] = W[W_M + 3 * a + 2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def geometry_for(P, y, W):
     """Refresh the geometry when the configuration evolves (it is set once per configuration when
     held fixed); returns the configuration (sx, sy, theta)."""
@@ -144,7 +151,7 @@ def geometry_for(P, y, W):
     return P[RP_X], P[RP_Y], P[RP_TH]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def gauss_solve(M, mo, b, bo, n):
     """Solve M x = b in place (x replaces b) by elimination with partial pivoting; returns det(M).
 
@@ -186,7 +193,7 @@ def gauss_solve(M, mo, b, bo, n):
     return det
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def contact_velocities(sx, sy, Vx, Vy, wz, W):
     """Sliding velocities u_i of the three contacts into W[W_E + 2i], W[W_E + 2i + 1] (plate velocity
     from W_V, geometry from W); returns max |u_i|."""
@@ -203,10 +210,14 @@ def contact_velocities(sx, sy, Vx, Vy, wz, W):
     return umax
 
 
-@njit(cache=True)
-def sliding_accelerations(P, sx, sy, Vx, Vy, wz, W, K, s):
+@njit(cache=True, error_model="numpy")
+def sliding_accelerations(P, aux, sx, sy, Vx, Vy, wz, W, K, s):
     """Twist rates (Ax, Ay, thetaddot) -> K[s, 3:6] while sliding; normal forces -> W[W_N:W_N+3].
 
+    Friction per contact: Coulomb's -mu N u/|u|, continued through u = 0 like the point part's
+    (u's component against d_i, the direction at the step's start, reflected; d_i itself at a zero),
+    or, for a contact in the band (pivoting, or leaving a stuck state), the regularised
+    -mu N u / eps.
     Returns a status: CONTACT_LOST if some N_i <= 0, FRICTIONAL_SINGULARITY if the system is
     singular or its determinant has the opposite sign of the frictionless one.
     """
@@ -215,10 +226,25 @@ def sliding_accelerations(P, sx, sy, Vx, Vy, wz, W, K, s):
     h = W[W_H]
     contact_velocities(sx, sy, Vx, Vy, wz, W)
     for i in range(3):
-        nu = math.sqrt(W[W_E + 2 * i] ** 2 + W[W_E + 2 * i + 1] ** 2)
-        den = nu if nu > eps else eps
-        W[W_E + 2 * i] /= den
-        W[W_E + 2 * i + 1] /= den
+        ux = W[W_E + 2 * i]
+        uy = W[W_E + 2 * i + 1]
+        if aux[AX_BAND + i] > 0.0:
+            W[W_E + 2 * i] = ux / eps
+            W[W_E + 2 * i + 1] = uy / eps
+            continue
+        dx = aux[AX_RD + 2 * i]
+        dy = aux[AX_RD + 2 * i + 1]
+        nu = math.sqrt(ux * ux + uy * uy)
+        if nu > P[RP_ZTOL]:
+            proj = ux * dx + uy * dy
+            if proj < 0.0:
+                ux -= 2.0 * proj * dx
+                uy -= 2.0 * proj * dy
+            W[W_E + 2 * i] = ux / nu
+            W[W_E + 2 * i + 1] = uy / nu
+        else:
+            W[W_E + 2 * i] = dx
+            W[W_E + 2 * i + 1] = dy
     W[W_M + 0] = 0.0
     W[W_M + 4] = -W[W_IW + 2]
     W[W_M + 8] = -W[W_IW + 5]
@@ -263,7 +289,7 @@ def sliding_accelerations(P, sx, sy, Vx, Vy, wz, W, K, s):
     return status
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def stick_forces(P, sx, sy, W, uo):
     """Normal forces of a stuck part into W[W_N:W_N+3], for plate acceleration W[uo:uo+6].
 
@@ -292,7 +318,7 @@ def stick_forces(P, sx, sy, W, uo):
     return m * ax, m * ay, tz, nmin
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def stick_ratio(P, Fx, Fy, tz, W):
     """Smallest achievable max_i |f_i| / (mu_s,i N_i) for tangential forces f_i that give the
     required force (Fx, Fy) and yaw torque tz, with N_i from :func:`stick_forces` in W.
@@ -301,11 +327,23 @@ def stick_ratio(P, Fx, Fy, tz, W):
     is well inside; otherwise a log-barrier interior-point method solves the cone program
     min tau s.t. |g_i| <= tau over the 3-dimensional family of force distributions.
     """
+    # Cheap lower bounds first: |F| <= sum |f_i| and |tau_z| <= sum |rho_i| |f_i|. When either
+    # already exceeds 1 the part cannot stick and the bound is returned (it is <= the exact ratio,
+    # so the sign of 1 - ratio, all that the break-away event uses near 1, is unchanged).
+    cap_f = 0.0
+    cap_t = 0.0
+    for i in range(3):
+        ci = P[RP_MUS + i] * W[W_N + i]
+        if ci <= 0.0:
+            return 1e300 if (Fx != 0.0 or Fy != 0.0 or tz != 0.0) else 0.0
+        cap_f += ci
+        cap_t += ci * math.hypot(W[W_RX + i], W[W_RY + i])
+    bound = max(math.hypot(Fx, Fy) / cap_f, abs(tz) / cap_t if cap_t > 0.0 else 0.0)
+    if bound > 1.0:
+        return bound
     c = np.empty(3)
     for i in range(3):
         c[i] = P[RP_MUS + i] * W[W_N + i]
-        if c[i] <= 0.0:
-            return 1e300 if (Fx != 0.0 or Fy != 0.0 or tz != 0.0) else 0.0
     B = np.zeros((3, 6))
     for i in range(3):
         B[0, 2 * i] = c[i]
@@ -326,7 +364,7 @@ def stick_ratio(P, Fx, Fy, tz, W):
     return _socp_min_max(gp, Z, worst)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _barrier(gp, Z, x, tb):
     """Value of tb * tau - sum_i log(tau^2 - |g_i|^2) at x = (lambda (3), tau); inf if infeasible."""
     tau = x[3]
@@ -343,7 +381,7 @@ def _barrier(gp, Z, x, tb):
     return val
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _socp_min_max(gp, Z, start):
     x = np.zeros(4)
     x[3] = 1.05 * start + 1e-12
@@ -405,7 +443,7 @@ def _socp_min_max(gp, Z, start):
 # ================================================================ rigid part: right-hand side
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rigid_rhs(mc, P, aux, t, y, K, s, W):
     plate_eval(mc, t, W, W_U, W_V)
     sx, sy, _ = geometry_for(P, y, W)
@@ -419,10 +457,10 @@ def rigid_rhs(mc, P, aux, t, y, K, s, W):
         K[s, 5] = W[W_U + 5]
         _, _, _, nmin = stick_forces(P, sx, sy, W, W_U)
         return OK if nmin > 0.0 else CONTACT_LOST
-    return sliding_accelerations(P, sx, sy, y[3], y[4], y[5], W, K, s)
+    return sliding_accelerations(P, aux, sx, sy, y[3], y[4], y[5], W, K, s)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def plate_twist(sx, sy, W):
     """The twist (Vx, Vy, thetadot) of a part stuck to the plate (plate velocity from W_V)."""
     h = W[W_H]
@@ -430,7 +468,7 @@ def plate_twist(sx, sy, W):
             W[W_V + 5])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def rhs(kind, mc, P, aux, t, y, K, s, W):
     """Dispatch: kind 0 = point part, 1 = rigid part. Writes K[s, :]; returns a status."""
     if kind == 0:

@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ppod_ros.physics._advance import advance, point_init, rigid_init
+from ppod_ros.physics._advance import advance, point_init, rigid_init, zero_tolerance
 from ppod_ros.physics._contact import rigid_geometry
 from ppod_ros.physics._layout import (
     AX_READY,
@@ -28,12 +28,12 @@ from ppod_ros.physics._layout import (
     RP_VSCALE,
     RP_WSCALE,
     RP_X,
+    RP_ZTOL,
     S_ATOL_V,
     S_ATOL_W,
     S_CAPTURE,
     S_MAX_STEPS,
     S_RTOL,
-    S_ZERO_RTOL,
     W_SIZE,
 )
 from ppod_ros.physics._solve import rigid_scales
@@ -42,7 +42,7 @@ from ppod_ros.physics.plate import point_velocity_scale
 AUX_READY = AX_READY
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, error_model="numpy", parallel=True)
 def advance_group(kind, mc, Pall, Y, AUX, H, t0, t1, T, kmax, A, B, C, E, E3, S, status, stick_time, steps):
     """Advance every part of one kind from local time t0 to t1 in place.
 
@@ -82,7 +82,9 @@ def advance_group(kind, mc, Pall, Y, AUX, H, t0, t1, T, kmax, A, B, C, E, E3, S,
             sc[3] = S[S_RTOL] * vscale + S[S_ATOL_V]
             sc[4] = sc[3]
             sc[5] = S[S_RTOL] * wscale + S[S_ATOL_W]
-        zero_tol = S[S_ZERO_RTOL] * vscale + 1e-3 * S[S_ATOL_V]
+        zero_tol = zero_tolerance(S, vscale)
+        if kind == 1:
+            P[RP_ZTOL] = zero_tol
         if aux[AUX_READY] == 0.0:
             if kind == 0:
                 point_init(mc, P, aux, t0, y, W, zero_tol)

@@ -34,7 +34,8 @@ RP_CANSTICK = 30
 RP_VSCALE = 31    # velocity scale (m/s) for tolerances
 RP_WSCALE = 32    # yaw-rate scale (rad/s) for tolerances
 RP_DET0 = 33      # determinant of the frictionless contact system (sign reference)
-RP_SIZE = 34
+RP_ZTOL = 34      # contact speeds below this are zero (m/s)
+RP_SIZE = 36
 
 # ---- aux (mode and sliding-direction memory), per part -------------------------------------------
 AX_MODE, AX_DX, AX_DY = 0, 1, 2
@@ -77,4 +78,5 @@ S_EXPONENT = 15     # step-size exponent -1/(q+1)
 S_SKIP_STICK = 16   # 1: skip sticking logic where sticking is provably impossible
 S_CHUNK = 17        # configurations per parallel work item
 S_STARTS = 18       # rigid: number of initial twists compared
+S_MIN_STEPS = 19    # steps per period and harmonic at least (events hide in longer steps)
 S_SIZE = 20

@@ -8,8 +8,11 @@ cache directory (``NUMBA_CACHE_DIR``); either way nothing here depends on the ca
 
 from __future__ import annotations
 
+import hashlib
+import logging
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -19,6 +22,10 @@ from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import _layout as lay
 from ppod_ros.physics._contact import frictionless_det
 
+_log = logging.getLogger(__name__)
+#: Modules whose compiled code numba caches (their digest guards the cache, see _drop_stale_cache).
+KERNEL_SOURCES = ("_layout.py", "plate.py", "_contact.py", "_rk.py", "_advance.py", "_closed_form.py",
+                  "_solve.py", "_dynamics_kernel.py")
 _lock = threading.Lock()
 _setup_seconds: float | None = None
 
@@ -82,9 +89,41 @@ def ensure_compiled() -> float:
         if _setup_seconds is not None:
             return 0.0
         t0 = time.perf_counter()
+        _drop_stale_cache()
         _warm_up()
         _setup_seconds = time.perf_counter() - t0
         return _setup_seconds
+
+
+def _drop_stale_cache() -> None:
+    """Delete numba's cached machine code of this package when any kernel source changed.
+
+    Numba validates a cached function against its own source file only, but the kernels inline
+    functions and constants from the other modules here (``_layout``, ``_contact``...): after an
+    edit of one module, cached code of another could silently use the old version. A digest of all
+    sources, kept next to the cache, catches that. (A read-only package uses numba's user-wide
+    cache directory instead; installed sources do not change, so nothing is checked there.)
+    """
+    here = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for name in KERNEL_SOURCES:
+        digest.update(name.encode())
+        digest.update((here / name).read_bytes())
+    stamp = digest.hexdigest()
+    cache_dir = here / "__pycache__"
+    stamp_file = cache_dir / "ppod_kernels.stamp"
+    try:
+        if stamp_file.read_text() == stamp:
+            return
+    except OSError:
+        pass  # no stamp yet: treat the cache as stale
+    try:
+        for f in list(cache_dir.glob("*.nbi")) + list(cache_dir.glob("*.nbc")):
+            f.unlink()
+        cache_dir.mkdir(exist_ok=True)
+        stamp_file.write_text(stamp)
+    except OSError as exc:
+        _log.debug("numba cache in %s not managed (%s); numba uses its user-wide cache", cache_dir, exc)
 
 
 def setup_seconds_total() -> float:

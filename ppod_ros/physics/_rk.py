@@ -69,7 +69,7 @@ INTEGRATORS: dict[str, Tableau] = {
 }
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rk_step(kind, mc, P, aux, t, y, h, A, B, C, E, E3, combined, K, reuse_f0, ytmp, ynew, W, sc, n):
     """One step of size h from (t, y) into ``ynew``; returns (scaled error norm, worst status).
 

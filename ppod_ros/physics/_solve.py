@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ppod_ros.physics._advance import advance, point_init, rigid_init
+from ppod_ros.physics._advance import advance, point_init, rigid_init, zero_tolerance
 from ppod_ros.physics._closed_form import collinear_direction, line_solve, line_table
 from ppod_ros.physics._contact import gauss_solve, point_plate, rigid_geometry, stick_forces
 from ppod_ros.physics._layout import (
@@ -44,6 +44,7 @@ from ppod_ros.physics._layout import (
     RP_WSCALE,
     RP_X,
     RP_Y,
+    RP_ZTOL,
     S_ATOL_V,
     S_ATOL_W,
     S_CAPTURE,
@@ -73,7 +74,7 @@ from ppod_ros.physics.plate import min_normal_accel, plate_eval, point_velocity_
 # ------------------------------------------------------------------ checks before integrating
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def point_can_stick(mc, P, x, y, T, ns, W):
     """False only if mu_s n(t) < |a_h(t)| for every t (proved: sampled maximum + Lipschitz bound)."""
     mus = P[PP_MUS]
@@ -94,7 +95,7 @@ def point_can_stick(mc, P, x, y, T, ns, W):
     return gmax + 0.5 * lip * dt >= 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rigid_can_stick(mc, P, sx, sy, T, ns, W):
     """False only if sum_i mu_s,i N_i(t) < |m A_stick(t)| for every t (a necessary condition for
     sticking), proved as in :func:`point_can_stick`; the normal forces are those of the stuck part."""
@@ -133,7 +134,7 @@ def rigid_can_stick(mc, P, sx, sy, T, ns, W):
     return gmax + 0.5 * lip * dt >= 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rigid_scales(mc, P, sx, sy, W):
     """(velocity scale m/s, yaw-rate scale rad/s): bounds on the plate's twist at the configuration."""
     h = W[W_H]
@@ -155,7 +156,7 @@ def rigid_scales(mc, P, sx, sy, W):
 # ------------------------------------------------------------------ fixed point of the period map
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, n, dim, tolv,
                 zero_tol, out_v, out_x, stats):
     """Returns (status, periods, sticking fraction of the final period, step size)."""
@@ -201,7 +202,7 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
     return NOT_CONVERGED, maxp, 0.0, h
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _push(Xh, Fh, q, depth, x, f):
     if q == depth + 1:
         for i in range(depth):
@@ -213,7 +214,7 @@ def _push(Xh, Fh, q, depth, x, f):
     return q + 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _anderson(Xh, Fh, q, dim, tolv, x):
     """x <- x_k + f_k - (dX + dF) gamma, gamma = argmin |f_k - dF gamma| (components scaled by
     their tolerances); with one stored pair this is the plain step x_k + f_k."""
@@ -262,7 +263,7 @@ def _anderson(Xh, Fh, q, dim, tolv, x):
 # ------------------------------------------------------------------ all configurations
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, error_model="numpy", parallel=True)
 def solve_batch(kind, mc, Pall, X0, has_x0, T, kmax, A, B, C, E, E3, S, out_v, out_x, out_status,
                 out_periods, out_stick):
     N = Pall.shape[0]
@@ -323,7 +324,9 @@ def solve_batch(kind, mc, Pall, X0, has_x0, T, kmax, A, B, C, E, E3, S, out_v, o
                 else:
                     sc[dim + j] = S[S_RTOL] * vscale + S[S_ATOL_V]
                     tolv[j] = S[S_FP_RTOL] * vscale + S[S_FP_ATOL_V]
-            zero_tol = S[S_ZERO_RTOL] * vscale + 1e-3 * S[S_ATOL_V]
+            zero_tol = zero_tolerance(S, vscale)
+            if kind == 1:
+                P[RP_ZTOL] = zero_tol
             # Starting guess: the caller's, else the neighbour's limit cycle, else rest.
             for j in range(dim):
                 x0[j] = X0[i, j] if has_x0[i] else (warm[j] if have_warm else 0.0)
@@ -371,7 +374,7 @@ def solve_batch(kind, mc, Pall, X0, has_x0, T, kmax, A, B, C, E, E3, S, out_v, o
                     have_warm = True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, tolv, zero_tol, vres,
                   vscale, wscale, stats):
     """Rigid parts: solve again from other initial twists; disagreement is reported, not hidden."""

@@ -63,7 +63,7 @@ def table_kmax(table: np.ndarray, omega: float) -> int:
     return max(1, int(round(float(table[:, COL_W].max()) / omega)))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def plate_eval(mc, t, W, ou, ov):
     """Write the plate acceleration into W[ou:ou+6] and its velocity into W[ov:ov+6] at time t.
 
@@ -81,7 +81,7 @@ def plate_eval(mc, t, W, ou, ov):
             W[ov + j] += mc[r, 13 + j] * s + mc[r, 19 + j] * c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def point_velocity_scale(mc, x, y):
     """Bound on |v_h| at plate point (x, y): the natural velocity scale for tolerances (m/s)."""
     total = 0.0
@@ -94,7 +94,7 @@ def point_velocity_scale(mc, x, y):
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def min_normal_accel(mc, x, y, period, nscan):
     """Minimum over one period of n(t) = g + a_n(x, y, t) (m/s^2): sampled, then refined.
 
@@ -137,7 +137,7 @@ def min_normal_accel(mc, x, y, period, nscan):
     return min(best, fc, fd)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _normal_at(mc, x, y, t):
     n = G
     for r in range(mc.shape[0]):

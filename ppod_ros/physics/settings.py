@@ -63,6 +63,9 @@ class SolverSettings:
         Rigid parts: contact speeds below stick_capture * friction_eps_mps trigger the sticking test.
     scan_per_harmonic : int
         Samples per period and harmonic for event brackets and cycle minima.
+    min_steps_per_period : int
+        At least this many steps per period and harmonic: a longer step could hide two events
+        (a relative velocity through zero and back) between its ends.
     closed_form : bool
         Point parts: use the closed form where a_h is collinear.
     warm_start : bool
@@ -96,6 +99,7 @@ class SolverSettings:
     friction_eps_mps: float = 1e-6
     stick_capture: float = 10.0
     scan_per_harmonic: int = 16
+    min_steps_per_period: int = 12
     closed_form: bool = True
     warm_start: bool = True
     skip_sticking: bool = True
@@ -123,7 +127,8 @@ class SolverSettings:
             raise ConfigError(f"rtol, fixed_point_rtol: must be < 0.1, got {self.rtol}, "
                               f"{self.fixed_point_rtol}")
         ints = {"anderson_depth": (1, 5), "max_periods": (1, 100000), "max_steps_per_period": (10, 10**8),
-                "scan_per_harmonic": (4, 1024), "chunk": (1, 4096), "rigid_starts": (1, 16)}
+                "scan_per_harmonic": (4, 1024), "chunk": (1, 4096), "rigid_starts": (1, 16),
+                "min_steps_per_period": (4, 10000)}
         for name, (lo, hi) in ints.items():
             val = getattr(self, name)
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or not lo <= val <= hi:
@@ -173,6 +178,7 @@ class SolverSettings:
         S[lay.S_SKIP_STICK] = float(self.skip_sticking)
         S[lay.S_CHUNK] = self.chunk
         S[lay.S_STARTS] = self.rigid_starts
+        S[lay.S_MIN_STEPS] = self.min_steps_per_period
         return S
 
     def describe(self) -> str:

@@ -41,6 +41,8 @@ from ppod_ros.physics._layout import (
     OK,
     PP_CANSTICK,
     PP_EVOLVE,
+    PP_KAPPA,
+    PP_MU,
     PP_MUS,
     PP_X,
     PP_Y,
@@ -66,7 +68,7 @@ from ppod_ros.physics._layout import (
     W_V,
 )
 from ppod_ros.physics._rk import rk_step
-from ppod_ros.physics.plate import plate_eval
+from ppod_ros.physics.plate import G, plate_eval
 
 
 @njit(cache=True, error_model="numpy")
@@ -276,6 +278,8 @@ def on_event(kind, mc, P, aux, t, y, W, zero_tol, force_zero, capture):
     ahx, ahy, n, vhx, vhy = point_plate(mc, P, t, x, yy, W)
     if aux[AX_MODE] == STICK:
         aux[AX_MODE] = SLIDE
+        y[2] = vhx  # leave exactly from the plate's velocity (no drift of the sticking phase)
+        y[3] = vhy
         a = math.hypot(ahx, ahy)
         if a > 0.0:
             aux[AX_DX] = -ahx / a
@@ -291,6 +295,28 @@ def on_event(kind, mc, P, aux, t, y, W, zero_tol, force_zero, capture):
     else:
         aux[AX_DX] = wx / nw
         aux[AX_DY] = wy / nw
+
+
+@njit(cache=True, error_model="numpy")
+def _point_capture(P, aux, y, W, capture):
+    """After a sliding step (W holding the step end's w and plate motion, from event_value): a part
+    whose relative speed is below ``capture`` while kinetic friction still decelerates it
+    (mu n > |a_h|) and static friction can hold it, would stick within a time of order
+    capture / (mu n - |a_h|); stick now. Resolving that last approach would need steps ever
+    shorter near the singularity of w/|w| at w = 0."""
+    if P[PP_CANSTICK] <= 0.0 or math.hypot(W[W_S], W[W_S + 1]) > capture:
+        return False
+    x, yy = _point_xy(P, y)
+    ahx = W[W_U + 0] - W[W_U + 5] * yy
+    ahy = W[W_U + 1] + W[W_U + 5] * x
+    n = G + W[W_U + 2] + W[W_U + 3] * yy - W[W_U + 4] * x
+    a = math.hypot(ahx, ahy)
+    if a >= P[PP_MU] * n or a > P[PP_MUS] * n:
+        return False
+    y[2] -= W[W_S]
+    y[3] -= W[W_S + 1]
+    aux[AX_MODE] = STICK
+    return True
 
 
 @njit(cache=True, error_model="numpy")
@@ -477,6 +503,18 @@ def advance(kind, mc, P, aux, t0, t1, y, h, period, A, B, C, E, E3, S, K, ytmp, 
         for j in range(n):
             y[j] = ynew[j]
             K[0, j] = K[ns, j]
+        if kind == 0 and aux[AX_MODE] == STICK:
+            # A sticking point part moves exactly with the plate (event_value left v at t in W).
+            x, yy = _point_xy(P, y)
+            y[2] = W[W_V + 0] - W[W_V + 5] * yy
+            y[3] = W[W_V + 1] + W[W_V + 5] * x
+            K[0, 0] = y[2]
+            K[0, 1] = y[3]
+            K[0, 2] = W[W_U + 0] - W[W_U + 5] * yy
+            K[0, 3] = W[W_U + 1] + W[W_U + 5] * x
+        if kind == 0 and aux[AX_MODE] == SLIDE and _point_capture(P, aux, y, W, P[PP_KAPPA]):
+            reuse = False
+            stats[2] += 1
         if kind == 1 and aux[AX_MODE] == SLIDE and aux[AX_BAND] + aux[AX_BAND + 1] + aux[AX_BAND + 2] > 0.0 \
                 and rigid_try_stick(mc, P, aux, t, y, W, capture):
             # Contacts held by the regularised law may all have come to rest: stick if allowed.

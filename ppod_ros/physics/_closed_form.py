@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ppod_ros.physics._layout import NOT_CONVERGED, OK
+from ppod_ros.physics._layout import NOT_CONVERGED, OK, STEP_LIMIT
 from ppod_ros.physics.plate import G
 
 
@@ -42,11 +42,20 @@ def collinear_direction(mc, x, y):
     tr = gxx + gyy
     if tr == 0.0:
         return True, 1.0, 0.0
-    det = gxx * gyy - gxy * gxy
-    if det > 1e-20 * tr * tr:
-        return False, 1.0, 0.0
     ang = 0.5 * math.atan2(2.0 * gxy, gxx - gyy)
-    return True, math.cos(ang), math.sin(ang)
+    ex = math.cos(ang)
+    ey = math.sin(ang)
+    # Energy across the principal direction, summed directly (the determinant of the Gram matrix
+    # would lose it to cancellation): collinear if below (1e-10)^2 of the total.
+    perp = 0.0
+    for r in range(mc.shape[0]):
+        for off in (1, 7):
+            ax = mc[r, off + 0] - mc[r, off + 5] * y
+            ay = mc[r, off + 1] + mc[r, off + 5] * x
+            perp += (ex * ay - ey * ax) ** 2
+    if perp > 1e-20 * tr:
+        return False, 1.0, 0.0
+    return True, ex, ey
 
 
 @njit(cache=True, error_model="numpy")
@@ -107,10 +116,15 @@ def _phi(c1, which, t, lam0, sig, mu, mus, N0):
 
 
 @njit(cache=True, error_model="numpy")
-def first_event(c1, which, t0, t1, dt, lam0, sig, mu, mus, N0):
-    """First t in (t0, t1] where phi <= 0 (phi > 0 just after t0), or -1 if none."""
+def first_event(c1, which, t0, t1, dt, lam0, sig, mu, mus, N0, ftol):
+    """First t in (t0, t1] where phi falls to <= -ftol (phi > 0 just after t0), or -1 if none.
+
+    Sliding starts at a zero of F (phi(t0) = 0); at a break-away with mu_s = mu even phi'(t0) = 0,
+    and rounding must not turn that start into an event: hence ftol > 0 for sliding. Sticking may
+    end at once (phi(t0) = 0 and falling): then t0 is returned.
+    """
     fa, da = _phi(c1, which, t0, lam0, sig, mu, mus, N0)
-    if fa <= 0.0 and da < 0.0:
+    if which == 1 and fa <= 0.0 and da < 0.0:
         return t0
     ta = t0
     while ta < t1:
@@ -118,7 +132,7 @@ def first_event(c1, which, t0, t1, dt, lam0, sig, mu, mus, N0):
         fb, db = _phi(c1, which, tb, lam0, sig, mu, mus, N0)
         lo = -1.0
         hi = -1.0
-        if fb <= 0.0:
+        if fb <= -ftol:
             lo, hi = ta, tb
         elif da < 0.0 < db:
             # Interior minimum: find it (bisection on phi'), then test its sign.
@@ -133,7 +147,7 @@ def first_event(c1, which, t0, t1, dt, lam0, sig, mu, mus, N0):
                 if b - a < 1e-15 * (1.0 + abs(t1)):
                     break
             fm, dm = _phi(c1, which, 0.5 * (a + b), lam0, sig, mu, mus, N0)
-            if fm <= 0.0:
+            if fm <= -ftol:
                 lo, hi = ta, 0.5 * (a + b)
         if hi >= 0.0:
             return _refine(c1, which, lo, hi, lam0, sig, mu, mus, N0)
@@ -164,8 +178,9 @@ def _refine(c1, which, lo, hi, lam0, sig, mu, mus, N0):
 
 @njit(cache=True, error_model="numpy")
 def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats):
-    """One period from lambda(0) = lam0: returns (lambda(T), integral of lambda, d lambda(T)/d lam0).
-    stats[0] += time sticking, stats[2] += events."""
+    """One period from lambda(0) = lam0: returns (lambda(T), integral of lambda, d lambda(T)/d lam0,
+    ok). stats[0] += time sticking, stats[2] += events. ok is False if the events did not advance
+    (more than 10000 in the period)."""
     al, dal, lv, Lv, n, dn, N, M = eval_line(c1, 0.0)
     t = 0.0
     lam = lam0
@@ -183,9 +198,9 @@ def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats):
             sig = -1.0 if al > 0.0 else 1.0
     else:
         sig = 1.0 if F0 > 0.0 else -1.0
-    for _ in range(100000):
+    for _ in range(10000):
         if stick:
-            tb = first_event(c1, 1, t, T, dt, 0.0, 0.0, mu, mus, 0.0)
+            tb = first_event(c1, 1, t, T, dt, 0.0, 0.0, mu, mus, 0.0, 0.0)
             te = T if tb < 0.0 else tb
             al, dal, lv, Lv1, n, dn, N, M = eval_line(c1, te)
             Lv0 = eval_line(c1, t)[3]
@@ -201,7 +216,7 @@ def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats):
         else:
             N0 = eval_line(c1, t)[6]
             M0 = eval_line(c1, t)[7]
-            tc = first_event(c1, 0, t, T, dt, lam, sig, mu, mus, N0)
+            tc = first_event(c1, 0, t, T, dt, lam, sig, mu, mus, N0, zero_tol)
             te = T if tc < 0.0 else tc
             al, dal, lv, Lv, n, dn, N, M = eval_line(c1, te)
             integ += lam * (te - t) - sig * mu * (M - M0 - N0 * (te - t))
@@ -219,8 +234,8 @@ def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats):
                 dP *= (al - sig * mu * n) / (al + sig * mu * n)
                 sig = -1.0 if al > 0.0 else 1.0
         if t >= T:
-            break
-    return lam, integ, dP
+            return lam, integ, dP, True
+    return lam, integ, dP, t >= T
 
 
 @njit(cache=True, error_model="numpy")
@@ -230,7 +245,9 @@ def line_solve(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, tol, max_periods, 
     best = 1e300
     for it in range(max_periods):
         stats[0] = 0.0
-        lamT, integ, dP = line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats)
+        lamT, integ, dP, ok = line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats)
+        if not ok:
+            return STEP_LIMIT, 0.0, lam0, it + 1
         r = lamT - lam0
         if abs(r) <= tol:
             return OK, integ / T, lam0, it + 1

@@ -35,6 +35,7 @@ from ppod_ros.physics._layout import (
     FRICTIONAL_SINGULARITY,
     OK,
     PP_EVOLVE,
+    PP_KAPPA,
     PP_MU,
     PP_X,
     PP_Y,
@@ -88,6 +89,17 @@ def point_rhs(mc, P, aux, t, y, K, s, W):
         wx = y[2] - (W[W_V + 0] - W[W_V + 5] * yy)
         wy = y[3] - (W[W_V + 1] + W[W_V + 5] * x)
         nw = math.sqrt(wx * wx + wy * wy)
+        ahx = W[W_U + 0] - W[W_U + 5] * yy
+        ahy = W[W_U + 1] + W[W_U + 5] * x
+        a = math.sqrt(ahx * ahx + ahy * ahy)
+        f = P[PP_MU] * n
+        if nw <= P[PP_KAPPA] and a >= f and a > 0.0:
+            # Just leaving w = 0 (a break-away, or a reversal): the part slides away along -a_h.
+            # Following w/|w| at speeds this small would take ever shorter steps (the direction
+            # is singular at 0) for a change in velocity below kappa.
+            K[s, 2] = -f * (-ahx / a)
+            K[s, 3] = -f * (-ahy / a)
+            return OK if n > 0.0 else CONTACT_LOST
         if nw > 0.0:
             # Continued direction: w with its component against d reflected (see the module doc).
             proj = wx * aux[AX_DX] + wy * aux[AX_DY]
@@ -99,7 +111,6 @@ def point_rhs(mc, P, aux, t, y, K, s, W):
         else:
             ex = aux[AX_DX]
             ey = aux[AX_DY]
-        f = P[PP_MU] * n
         K[s, 2] = -f * ex
         K[s, 3] = -f * ey
     return OK if n > 0.0 else CONTACT_LOST

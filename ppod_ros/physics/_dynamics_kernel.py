@@ -21,6 +21,7 @@ from ppod_ros.physics._layout import (
     OK,
     PP_CANSTICK,
     PP_EVOLVE,
+    PP_KAPPA,
     PP_VSCALE,
     PP_X,
     RP_CANSTICK,
@@ -73,6 +74,7 @@ def advance_group(kind, mc, Pall, Y, AUX, H, t0, t1, T, kmax, A, B, C, E, E3, S,
             P[PP_CANSTICK] = 1.0
             sc[2] = S[S_RTOL] * vscale + S[S_ATOL_V]
             sc[3] = sc[2]
+            P[PP_KAPPA] = 100.0 * sc[2]
         else:
             rigid_geometry(P, y[2], W)
             vscale, wscale = rigid_scales(mc, P, y[0], y[1], W)

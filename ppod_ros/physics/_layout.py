@@ -19,6 +19,7 @@ STICK = 1
 
 # ---- point part parameters P (per configuration) ------------------------------------------------
 PP_MU, PP_MUS, PP_X, PP_Y, PP_EVOLVE, PP_CANSTICK, PP_VSCALE = 0, 1, 2, 3, 4, 5, 6
+PP_KAPPA = 7      # relative speeds below this are "just leaving" or "about to stick" (m/s)
 PP_SIZE = 8
 
 # ---- rigid part parameters P (per configuration) ------------------------------------------------

@@ -31,6 +31,7 @@ from ppod_ros.physics._layout import (
     NOT_CONVERGED,
     OK,
     PP_CANSTICK,
+    PP_KAPPA,
     PP_MU,
     PP_MUS,
     PP_VSCALE,
@@ -327,6 +328,8 @@ def solve_batch(kind, mc, Pall, X0, has_x0, T, kmax, A, B, C, E, E3, S, out_v, o
             zero_tol = zero_tolerance(S, vscale)
             if kind == 1:
                 P[RP_ZTOL] = zero_tol
+            else:
+                P[PP_KAPPA] = 100.0 * sc[2]
             # Starting guess: the caller's, else the neighbour's limit cycle, else rest.
             for j in range(dim):
                 x0[j] = X0[i, j] if has_x0[i] else (warm[j] if have_warm else 0.0)

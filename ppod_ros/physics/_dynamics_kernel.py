@@ -86,7 +86,7 @@ def advance_group(kind, mc, Pall, Y, AUX, H, t0, t1, T, kmax, A, B, C, E, E3, S,
             sc[5] = S[S_RTOL] * wscale + S[S_ATOL_W]
         zero_tol = zero_tolerance(S, vscale)
         if kind == 1:
-            P[RP_ZTOL] = zero_tol
+            P[RP_ZTOL] = max(zero_tol, 100.0 * sc[3])
         if aux[AUX_READY] == 0.0:
             if kind == 0:
                 point_init(mc, P, aux, t0, y, W, zero_tol)

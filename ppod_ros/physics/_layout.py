@@ -35,7 +35,7 @@ RP_CANSTICK = 30
 RP_VSCALE = 31    # velocity scale (m/s) for tolerances
 RP_WSCALE = 32    # yaw-rate scale (rad/s) for tolerances
 RP_DET0 = 33      # determinant of the frictionless contact system (sign reference)
-RP_ZTOL = 34      # contact speeds below this are zero (m/s)
+RP_ZTOL = 34      # contact speeds below this are zero: a contact there slides along d_i (m/s)
 RP_SIZE = 36
 
 # ---- aux (mode and sliding-direction memory), per part -------------------------------------------

@@ -327,7 +327,7 @@ def solve_batch(kind, mc, Pall, X0, has_x0, T, kmax, A, B, C, E, E3, S, out_v, o
                     tolv[j] = S[S_FP_RTOL] * vscale + S[S_FP_ATOL_V]
             zero_tol = zero_tolerance(S, vscale)
             if kind == 1:
-                P[RP_ZTOL] = zero_tol
+                P[RP_ZTOL] = max(zero_tol, 100.0 * sc[3])
             else:
                 P[PP_KAPPA] = 100.0 * sc[2]
             # Starting guess: the caller's, else the neighbour's limit cycle, else rest.

@@ -81,7 +81,7 @@ def limit_cycle(motion: PlateMotion, part: PointPart | RigidPart, config: Any, n
         sc[5] = settings.rtol * wscale + settings.atol_radps
     zero_tol = zero_tolerance(S, vscale)
     if kind == 1:
-        P[lay.RP_ZTOL] = zero_tol
+        P[lay.RP_ZTOL] = max(zero_tol, 100.0 * sc[3])
     y = np.zeros(n)
     y[dim:] = res.cycle_start[0]
     aux = np.zeros(lay.AX_SIZE)

@@ -52,6 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     s.add_argument("--integrator", help="bs3, dopri5 or dop853")
     s.add_argument("--fixed-point", dest="fixed_point", help="anderson or picard")
     s.add_argument("--rtol", help="local error tolerance per step, relative to the velocity scale")
+    s.add_argument("--rigid-rtol", dest="rigid_rtol", help="the same for rigid parts")
     s.add_argument("--fixed-point-rtol", dest="fixed_point_rtol", help="limit-cycle convergence tolerance")
     s.add_argument("--max-periods", dest="max_periods",
                    help="periods per configuration before 'not converged'")
@@ -93,7 +94,8 @@ def _settings(args):
     from ppod_ros.physics import preset
 
     base = preset(args.preset)
-    conv = {"integrator": str, "fixed_point": str, "rtol": float, "fixed_point_rtol": float,
+    conv = {"integrator": str, "fixed_point": str, "rtol": float, "rigid_rtol": float,
+            "fixed_point_rtol": float,
             "max_periods": int, "friction_eps_mps": float, "threads": int}
     changes = {}
     for key, kind in conv.items():

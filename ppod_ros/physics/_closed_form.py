@@ -249,7 +249,7 @@ def line_solve(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, tol, max_periods, 
         if not ok:
             return STEP_LIMIT, 0.0, lam0, it + 1
         r = lamT - lam0
-        if abs(r) <= tol:
+        if abs(r) <= tol * (1.0 - min(dP, 0.95)):  # lam0 is within |r| / (1 - dP) of the cycle
             return OK, integ / T, lam0, it + 1
         # Newton while it makes progress; plain iteration otherwise (the map contracts).
         lam0 = lam0 + r / (1.0 - dP) if abs(r) < best and dP < 0.999 else lamT

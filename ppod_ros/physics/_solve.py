@@ -190,7 +190,10 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
         for j in range(dim):
             f[j] = y[dim + j] - x[j]
             res = max(res, abs(f[j]) / tolv[j])
-        if res <= 1.0:
+        # The period started at x is off the limit cycle by up to |f| / (1 - q) for a map that
+        # contracts by a rate estimated from the last two residuals (0.5 before there are two).
+        rate = min(0.95, res / prev) if it > 0 else 0.5
+        if res / (1.0 - rate) <= 1.0:
             for j in range(dim):
                 out_v[j] = y[j] / T
                 out_x[j] = x[j]

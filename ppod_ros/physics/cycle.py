@@ -61,7 +61,8 @@ def limit_cycle(motion: PlateMotion, part: PointPart | RigidPart, config: Any, n
     n = 2 * dim
     mc = motion_table(motion, prune=settings.prune_harmonics)
     tab = INTEGRATORS[settings.integrator]
-    S = settings.vector()
+    S = settings.vector(part.kind)
+    rtol = settings.step_rtol(part.kind)
     T = motion.period_s
     W = np.zeros(lay.W_SIZE)
     sc = np.zeros(n)
@@ -69,7 +70,7 @@ def limit_cycle(motion: PlateMotion, part: PointPart | RigidPart, config: Any, n
         P = point_rows(part, cfg)[0]
         vscale = point_velocity_scale(mc, cfg[0, 0], cfg[0, 1])
         P[lay.PP_VSCALE] = vscale
-        sc[2:] = settings.rtol * vscale + settings.atol_mps
+        sc[2:] = rtol * vscale + settings.atol_mps
         P[lay.PP_KAPPA] = 100.0 * sc[2]
     else:
         P = rigid_rows(part, cfg, settings.friction_eps_mps)[0]
@@ -77,8 +78,8 @@ def limit_cycle(motion: PlateMotion, part: PointPart | RigidPart, config: Any, n
         vscale, wscale = rigid_scales(mc, P, cfg[0, 0], cfg[0, 1], W)
         P[lay.RP_VSCALE] = vscale
         P[lay.RP_WSCALE] = wscale
-        sc[3:5] = settings.rtol * vscale + settings.atol_mps
-        sc[5] = settings.rtol * wscale + settings.atol_radps
+        sc[3:5] = rtol * vscale + settings.atol_mps
+        sc[5] = rtol * wscale + settings.atol_radps
     zero_tol = zero_tolerance(S, vscale)
     if kind == 1:
         P[lay.RP_ZTOL] = max(zero_tol, 100.0 * sc[3])

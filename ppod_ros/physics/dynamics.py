@@ -211,12 +211,12 @@ class PartDynamics:
             mc = motion_table(motion, prune=self.settings.prune_harmonics)
             kmax = table_kmax(mc, motion.omega)
             tab = INTEGRATORS[self.settings.integrator]
-            S = self.settings.vector()
             old = numba.get_num_threads()
             if self.settings.threads is not None:
                 numba.set_num_threads(min(self.settings.threads, numba.config.NUMBA_NUM_THREADS))
             try:
                 for g in self._groups:
+                    S = self.settings.vector("point" if g.kind == 0 else "rigid")
                     g.AUX[:, AUX_READY] = 0.0  # re-derive modes: the motion may have changed
                     g.stick[:] = 0.0
                     if duration > 0:

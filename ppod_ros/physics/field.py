@@ -240,8 +240,8 @@ def _run(motion, part, cfg, x0, settings, progress, velocity, start, code, perio
     mc = motion_table(motion, prune=settings.prune_harmonics)
     kmax = table_kmax(mc, motion.omega)
     tab = INTEGRATORS[settings.integrator]
-    S = settings.vector()
     kind = 0 if isinstance(part, PointPart) else 1
+    S = settings.vector(part.kind)
     P = point_rows(part, cfg) if kind == 0 else rigid_rows(part, cfg, settings.friction_eps_mps)
     n, dim = cfg.shape
     X0 = np.zeros((n, dim)) if x0 is None else x0

@@ -1,0 +1,45 @@
+"""Physics of parts on the vibrating plate (PHYSICS.md): asymptotic fields and full dynamics.
+
+Public API (stable; see docs/solver.md):
+
+- :func:`solve_field` -> :class:`FieldResult`: asymptotic velocity (point part) or twist (rigid
+  part) at many configurations, compiled and parallel; invalid configurations are flagged with a
+  reason, never returned as numbers.
+- :class:`SolverSettings`, :data:`PRESETS`, :func:`preset`: tolerances, integrator and fixed-point
+  method by name.
+- :class:`PartDynamics`: full dynamics of many parts with evolving configurations, advanced in
+  chunks (the simulated device).
+- :func:`limit_cycle`: the limit cycle itself at one configuration; :func:`grid_configs`: grids in
+  the ``ppod field`` order; :data:`FIELD_CACHE`: the result cache.
+
+Nothing here imports rclpy or message types.
+"""
+
+from ppod_ros.physics.cycle import limit_cycle
+from ppod_ros.physics.dynamics import DynamicsState, PartDynamics
+from ppod_ros.physics.field import FIELD_CACHE, FieldCache, FieldResult, grid_configs, solve_field
+from ppod_ros.physics.settings import (
+    FIXED_POINT_METHODS,
+    INTEGRATORS,
+    PRESETS,
+    REASONS,
+    SolverSettings,
+    preset,
+)
+
+__all__ = [
+    "FIELD_CACHE",
+    "FIXED_POINT_METHODS",
+    "INTEGRATORS",
+    "PRESETS",
+    "REASONS",
+    "DynamicsState",
+    "FieldCache",
+    "FieldResult",
+    "PartDynamics",
+    "SolverSettings",
+    "grid_configs",
+    "limit_cycle",
+    "preset",
+    "solve_field",
+]

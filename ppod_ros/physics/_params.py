@@ -1,0 +1,159 @@
+"""Parameter rows for the compiled kernels, configuration checks, and one-time compilation.
+
+:func:`ensure_compiled` compiles (or loads from numba's on-disk cache) every kernel once per process
+by running them on a tiny problem; the time it took is the solver's ``setup_seconds``. Numba
+writes its cache next to the sources (``__pycache__``) or, when that is read-only, to its user-wide
+cache directory (``NUMBA_CACHE_DIR``); either way nothing here depends on the cache being writable.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ppod_ros.errors import ConfigError
+from ppod_ros.parts import PointPart, RigidPart
+from ppod_ros.physics import _layout as lay
+from ppod_ros.physics._contact import frictionless_det
+
+_log = logging.getLogger(__name__)
+#: Modules whose compiled code numba caches (their digest guards the cache, see _drop_stale_cache).
+KERNEL_SOURCES = ("_layout.py", "plate.py", "_contact.py", "_rk.py", "_advance.py", "_closed_form.py",
+                  "_solve.py", "_dynamics_kernel.py")
+_lock = threading.Lock()
+_setup_seconds: float | None = None
+
+
+def check_part(part: Any) -> None:
+    if not isinstance(part, (PointPart, RigidPart)):
+        raise ConfigError(f"part: expected a PointPart or RigidPart, got {type(part).__name__}")
+
+
+def check_configs(configs: Any, part: PointPart | RigidPart, name: str = "configs") -> np.ndarray:
+    """Configurations as a float64 (N, 2) array for point parts, (N, 3) for rigid parts."""
+    dim = 2 if isinstance(part, PointPart) else 3
+    what = "[x, y] (m)" if dim == 2 else "[x, y, theta] (m, m, rad)"
+    try:
+        arr = np.array(configs, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{name}: expected numbers, rows of {what}: {exc}") from exc
+    if arr.ndim == 1 and arr.shape[0] == dim:
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] != dim:
+        raise ConfigError(f"{name}: expected shape (N, {dim}), rows of {what} for a {part.kind} part, "
+                          f"got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.argwhere(~np.isfinite(arr))[0, 0])
+        raise ConfigError(f"{name}: row {bad} is not finite: {arr[bad].tolist()}")
+    return np.ascontiguousarray(arr)
+
+
+def point_rows(part: PointPart, configs: np.ndarray, evolve: bool = False) -> np.ndarray:
+    P = np.zeros((configs.shape[0], lay.PP_SIZE))
+    P[:, lay.PP_MU] = part.mu
+    P[:, lay.PP_MUS] = part.mu_static
+    P[:, lay.PP_X] = configs[:, 0]
+    P[:, lay.PP_Y] = configs[:, 1]
+    P[:, lay.PP_EVOLVE] = float(evolve)
+    P[:, lay.PP_CANSTICK] = 1.0
+    return P
+
+
+def rigid_rows(part: RigidPart, configs: np.ndarray, eps_mps: float, evolve: bool = False) -> np.ndarray:
+    P = np.zeros((configs.shape[0], lay.RP_SIZE))
+    P[:, lay.RP_MASS] = part.mass
+    P[:, lay.RP_I:lay.RP_I + 9] = np.asarray(part.inertia, float).reshape(9)
+    P[:, lay.RP_R:lay.RP_R + 9] = np.asarray(part.contacts, float).reshape(9)
+    P[:, lay.RP_MU:lay.RP_MU + 3] = part.mu
+    P[:, lay.RP_MUS:lay.RP_MUS + 3] = part.mu_static
+    P[:, lay.RP_EPS] = eps_mps
+    P[:, lay.RP_X] = configs[:, 0]
+    P[:, lay.RP_Y] = configs[:, 1]
+    P[:, lay.RP_TH] = configs[:, 2]
+    P[:, lay.RP_EVOLVE] = float(evolve)
+    P[:, lay.RP_CANSTICK] = 1.0
+    P[:, lay.RP_DET0] = frictionless_det(part.contacts, part.inertia)
+    return P
+
+
+def ensure_compiled() -> float:
+    """Compile or load every kernel once; returns the seconds that took (0 after the first call)."""
+    global _setup_seconds
+    with _lock:
+        if _setup_seconds is not None:
+            return 0.0
+        t0 = time.perf_counter()
+        _drop_stale_cache()
+        _warm_up()
+        _setup_seconds = time.perf_counter() - t0
+        return _setup_seconds
+
+
+def _drop_stale_cache() -> None:
+    """Delete numba's cached machine code of this package when any kernel source changed.
+
+    Numba validates a cached function against its own source file only, but the kernels inline
+    functions and constants from the other modules here (``_layout``, ``_contact``...): after an
+    edit of one module, cached code of another could silently use the old version. A digest of all
+    sources, kept next to the cache, catches that. (A read-only package uses numba's user-wide
+    cache directory instead; installed sources do not change, so nothing is checked there.)
+    """
+    here = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for name in KERNEL_SOURCES:
+        digest.update(name.encode())
+        digest.update((here / name).read_bytes())
+    stamp = digest.hexdigest()
+    cache_dir = here / "__pycache__"
+    stamp_file = cache_dir / "ppod_kernels.stamp"
+    try:
+        if stamp_file.read_text() == stamp:
+            return
+    except OSError:
+        pass  # no stamp yet: treat the cache as stale
+    try:
+        for f in list(cache_dir.glob("*.nbi")) + list(cache_dir.glob("*.nbc")):
+            f.unlink()
+        cache_dir.mkdir(exist_ok=True)
+        stamp_file.write_text(stamp)
+    except OSError as exc:
+        _log.debug("numba cache in %s not managed (%s); numba uses its user-wide cache", cache_dir, exc)
+
+
+def setup_seconds_total() -> float:
+    """Seconds spent compiling/loading kernels in this process so far (0 if not yet)."""
+    return _setup_seconds or 0.0
+
+
+def _warm_up() -> None:
+    # Import here: the kernels' modules compile lazily on first call.
+    from ppod_ros.motion import PlateMotion
+    from ppod_ros.parts import published_rigid_part
+    from ppod_ros.physics import _dynamics_kernel, _solve
+    from ppod_ros.physics.plate import motion_table
+    from ppod_ros.physics.settings import SolverSettings
+
+    motion = PlateMotion.single(30.0, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0])
+    mc = motion_table(motion)
+    settings = SolverSettings()
+    S = settings.vector()
+    from ppod_ros.physics._rk import INTEGRATORS
+
+    tab = INTEGRATORS[settings.integrator]
+    for kind, part, configs in ((0, PointPart(0.3), np.array([[0.02, 0.0]])),
+                                (1, published_rigid_part(), np.array([[0.0, 0.0, 0.3]]))):
+        dim = configs.shape[1]
+        P = point_rows(part, configs) if kind == 0 else rigid_rows(part, configs, settings.friction_eps_mps)
+        n = configs.shape[0]
+        out_v = np.zeros((n, dim))
+        out_x = np.zeros((n, dim))
+        _solve.solve_batch(kind, mc, P, np.zeros((n, dim)), np.zeros(n, np.bool_), motion.period_s, 1,
+                           tab.A, tab.B, tab.C, tab.E, tab.E3, S, out_v, out_x, np.zeros(n, np.int64),
+                           np.zeros(n, np.int64), np.zeros(n))
+        _dynamics_kernel.warm_up(kind, mc, P, dim, tab, S, motion.period_s)

@@ -1,0 +1,405 @@
+"""The asymptotic solver's compiled driver: per configuration checks, the fixed point of the
+one-period map, and the parallel loop over configurations.
+
+For each configuration (in parallel over chunks of configurations; inside a chunk the previous
+configuration's limit cycle is the next one's starting guess when ``warm`` is on):
+
+1. checks that need no integration: contact loss (min over the cycle of g + a_n <= 0: flagged,
+   never integrated), the velocity scale for tolerances, and whether sticking is provably
+   impossible (a sampled lower bound plus a Lipschitz bound: if sticking cannot happen anywhere
+   in the cycle, its logic is skipped);
+2. point parts whose a_h is collinear: the closed form (``_closed_form.py``);
+3. otherwise the fixed point x* = P(x*) of the one-period map P (x: velocity or twist at the
+   cycle start), by Anderson acceleration of the iteration (depth 0: plain iteration; the map
+   contracts), each period integrated by ``_advance.advance``. Converged when |P(x) - x| is below
+   the fixed-point tolerance; the cycle average is that period's integral / T.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ppod_ros.physics._advance import advance, point_init, rigid_init, zero_tolerance
+from ppod_ros.physics._closed_form import collinear_direction, line_solve, line_table
+from ppod_ros.physics._contact import gauss_solve, point_plate, rigid_geometry, stick_forces
+from ppod_ros.physics._layout import (
+    AX_SIZE,
+    CONTACT_LOST,
+    NOT_CONVERGED,
+    OK,
+    PP_CANSTICK,
+    PP_KAPPA,
+    PP_MU,
+    PP_MUS,
+    PP_VSCALE,
+    PP_X,
+    PP_Y,
+    RP_CANSTICK,
+    RP_MUS,
+    RP_R,
+    RP_TH,
+    RP_VSCALE,
+    RP_WSCALE,
+    RP_X,
+    RP_Y,
+    RP_ZTOL,
+    S_ATOL_V,
+    S_ATOL_W,
+    S_CAPTURE,
+    S_CHUNK,
+    S_CLOSED_FORM,
+    S_DEPTH,
+    S_FP_ATOL_V,
+    S_FP_ATOL_W,
+    S_FP_RTOL,
+    S_MAX_PERIODS,
+    S_MAX_STEPS,
+    S_NSCAN,
+    S_RTOL,
+    S_SKIP_STICK,
+    S_STARTS,
+    S_WARM,
+    S_ZERO_RTOL,
+    STARTS_DISAGREE,
+    W_H,
+    W_N,
+    W_S,
+    W_SIZE,
+    W_U,
+)
+from ppod_ros.physics.plate import min_normal_accel, plate_eval, point_velocity_scale
+
+# ------------------------------------------------------------------ checks before integrating
+
+
+@njit(cache=True, error_model="numpy")
+def point_can_stick(mc, P, x, y, T, ns, W):
+    """False only if mu_s n(t) < |a_h(t)| for every t (proved: sampled maximum + Lipschitz bound)."""
+    mus = P[PP_MUS]
+    ln = 0.0
+    lax = 0.0
+    lay = 0.0
+    for r in range(mc.shape[0]):
+        w = mc[r, 0]
+        ln += w * math.hypot(mc[r, 3] + mc[r, 4] * y - mc[r, 5] * x, mc[r, 9] + mc[r, 10] * y - mc[r, 11] * x)
+        lax += w * math.hypot(mc[r, 1] - mc[r, 6] * y, mc[r, 7] - mc[r, 12] * y)
+        lay += w * math.hypot(mc[r, 2] + mc[r, 6] * x, mc[r, 8] + mc[r, 12] * x)
+    lip = mus * ln + lax + lay
+    dt = T / ns
+    gmax = -1e300
+    for i in range(ns):
+        ahx, ahy, n, _, _ = point_plate(mc, P, i * dt, x, y, W)
+        gmax = max(gmax, mus * n - math.hypot(ahx, ahy))
+    return gmax + 0.5 * lip * dt >= 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def rigid_can_stick(mc, P, sx, sy, T, ns, W):
+    """False only if sum_i mu_s,i N_i(t) < |m A_stick(t)| for every t (a necessary condition for
+    sticking), proved as in :func:`point_can_stick`; the normal forces are those of the stuck part."""
+    for j in range(6):
+        W[W_S + j] = 0.0
+    stick_forces(P, sx, sy, W, W_S)
+    n0 = W[W_N:W_N + 3].copy()
+    ns_ = np.zeros(3)
+    nc_ = np.zeros(3)
+    lip = 0.0
+    for r in range(mc.shape[0]):
+        for j in range(6):
+            W[W_S + j] = mc[r, 1 + j]
+        fxs, fys, _, _ = stick_forces(P, sx, sy, W, W_S)
+        for i in range(3):
+            ns_[i] = W[W_N + i] - n0[i]
+        for j in range(6):
+            W[W_S + j] = mc[r, 7 + j]
+        fxc, fyc, _, _ = stick_forces(P, sx, sy, W, W_S)
+        for i in range(3):
+            nc_[i] = W[W_N + i] - n0[i]
+        acc = math.sqrt(fxs * fxs + fys * fys + fxc * fxc + fyc * fyc)
+        for i in range(3):
+            acc += P[RP_MUS + i] * math.hypot(ns_[i], nc_[i])
+        lip += mc[r, 0] * acc
+    dt = T / ns
+    gmax = -1e300
+    for k in range(ns):
+        t = k * dt
+        plate_eval(mc, t, W, W_S, W_U)  # acceleration into the scratch slot
+        fx, fy, _, _ = stick_forces(P, sx, sy, W, W_S)
+        cap = 0.0
+        for i in range(3):
+            cap += P[RP_MUS + i] * W[W_N + i]
+        gmax = max(gmax, cap - math.hypot(fx, fy))
+    return gmax + 0.5 * lip * dt >= 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def rigid_scales(mc, P, sx, sy, W):
+    """(velocity scale m/s, yaw-rate scale rad/s): bounds on the plate's twist at the configuration."""
+    h = W[W_H]
+    lpart = 0.0
+    for i in range(3):
+        lpart = max(lpart, math.hypot(P[RP_R + 3 * i], P[RP_R + 3 * i + 1]))
+    lpart = max(lpart, 1e-6)
+    vs = 0.0
+    for r in range(mc.shape[0]):
+        acc = 0.0
+        for off in (13, 19):
+            vx = mc[r, off] - mc[r, off + 5] * sy + h * mc[r, off + 4]
+            vy = mc[r, off + 1] + mc[r, off + 5] * sx - h * mc[r, off + 3]
+            acc += vx * vx + vy * vy
+        vs += math.sqrt(acc) + lpart * math.hypot(mc[r, 18], mc[r, 24])
+    return vs, vs / lpart
+
+
+# ------------------------------------------------------------------ fixed point of the period map
+
+
+@njit(cache=True, error_model="numpy")
+def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, n, dim, tolv,
+                zero_tol, out_v, out_x, stats):
+    """Returns (status, periods, sticking fraction of the final period, step size)."""
+    depth = int(S[S_DEPTH])
+    maxp = int(S[S_MAX_PERIODS])
+    max_steps = int(S[S_MAX_STEPS])
+    aux = np.zeros(AX_SIZE)
+    y = np.zeros(n)
+    x = x0.copy()
+    Xh = np.zeros((depth + 1, dim))
+    Fh = np.zeros((depth + 1, dim))
+    f = np.zeros(dim)
+    q = 0
+    prev = 1e300
+    for it in range(maxp):
+        for j in range(n):
+            y[j] = 0.0
+        for j in range(dim):
+            y[dim + j] = x[j]
+        if kind == 0:
+            point_init(mc, P, aux, 0.0, y, W, zero_tol)
+        else:
+            rigid_init(mc, P, aux, 0.0, y, W, S[S_CAPTURE])
+        stats[0] = 0.0
+        st, h = advance(kind, mc, P, aux, 0.0, T, y, h, T, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, n,
+                        max_steps, zero_tol, stats)
+        if st != OK:
+            return st, it + 1, 0.0, h
+        res = 0.0
+        for j in range(dim):
+            f[j] = y[dim + j] - x[j]
+            res = max(res, abs(f[j]) / tolv[j])
+        # The period started at x is off the limit cycle by up to |f| / (1 - q) for a map that
+        # contracts by a rate estimated from the last two residuals (0.5 before there are two).
+        rate = min(0.95, res / prev) if it > 0 else 0.5
+        if res / (1.0 - rate) <= 1.0:
+            for j in range(dim):
+                out_v[j] = y[j] / T
+                out_x[j] = x[j]
+            return OK, it + 1, stats[0] / T, h
+        if res >= prev:
+            q = 0  # no progress: restart the acceleration (plain step below)
+        prev = res
+        q = _push(Xh, Fh, q, depth, x, f)
+        _anderson(Xh, Fh, q, dim, tolv, x)
+    return NOT_CONVERGED, maxp, 0.0, h
+
+
+@njit(cache=True, error_model="numpy")
+def _push(Xh, Fh, q, depth, x, f):
+    if q == depth + 1:
+        for i in range(depth):
+            Xh[i] = Xh[i + 1]
+            Fh[i] = Fh[i + 1]
+        q = depth
+    Xh[q] = x
+    Fh[q] = f
+    return q + 1
+
+
+@njit(cache=True, error_model="numpy")
+def _anderson(Xh, Fh, q, dim, tolv, x):
+    """x <- x_k + f_k - (dX + dF) gamma, gamma = argmin |f_k - dF gamma| (components scaled by
+    their tolerances); with one stored pair this is the plain step x_k + f_k."""
+    k = q - 1
+    m = q - 1
+    for j in range(dim):
+        x[j] = Xh[k, j] + Fh[k, j]
+    if m == 0:
+        return
+    G = np.zeros(m * m)
+    g = np.zeros(m)
+    for a in range(m):
+        for b in range(m):
+            acc = 0.0
+            for j in range(dim):
+                acc += (Fh[a + 1, j] - Fh[a, j]) * (Fh[b + 1, j] - Fh[b, j]) / (tolv[j] * tolv[j])
+            G[a * m + b] = acc
+        acc = 0.0
+        for j in range(dim):
+            acc += (Fh[a + 1, j] - Fh[a, j]) * Fh[k, j] / (tolv[j] * tolv[j])
+        g[a] = acc
+    tr = 0.0
+    for a in range(m):
+        tr += G[a * m + a]
+    for a in range(m):
+        G[a * m + a] += 1e-10 * tr + 1e-300
+    if gauss_solve(G, 0, g, 0, m) == 0.0:
+        return
+    step = 0.0
+    plain = 0.0
+    for j in range(dim):
+        corr = 0.0
+        for a in range(m):
+            corr += g[a] * ((Xh[a + 1, j] - Xh[a, j]) + (Fh[a + 1, j] - Fh[a, j]))
+        step = max(step, abs(Fh[k, j] - corr) / tolv[j])
+        plain = max(plain, abs(Fh[k, j]) / tolv[j])
+    if not (step <= 20.0 * plain):
+        return  # a wild extrapolation: keep the plain step
+    for j in range(dim):
+        corr = 0.0
+        for a in range(m):
+            corr += g[a] * ((Xh[a + 1, j] - Xh[a, j]) + (Fh[a + 1, j] - Fh[a, j]))
+        x[j] -= corr
+
+
+# ------------------------------------------------------------------ all configurations
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def solve_batch(kind, mc, Pall, X0, has_x0, T, kmax, A, B, C, E, E3, S, out_v, out_x, out_status,
+                out_periods, out_stick):
+    N = Pall.shape[0]
+    dim = 2 if kind == 0 else 3
+    n = 2 * dim
+    chunk = max(1, int(S[S_CHUNK]))
+    nch = (N + chunk - 1) // chunk
+    nscan = int(S[S_NSCAN]) * kmax
+    for ci in prange(nch):
+        K = np.zeros((B.shape[0] + 1, n))
+        ytmp = np.zeros(n)
+        ynew = np.zeros(n)
+        ybest = np.zeros(n)
+        W = np.zeros(W_SIZE)
+        sc = np.zeros(n)
+        tolv = np.zeros(dim)
+        x0 = np.zeros(dim)
+        vres = np.zeros(dim)
+        xres = np.zeros(dim)
+        stats = np.zeros(4)
+        warm = np.zeros(dim)
+        have_warm = False
+        h = T / (8.0 * kmax)
+        for i in range(ci * chunk, min(N, (ci + 1) * chunk)):
+            P = Pall[i]
+            for j in range(dim):
+                out_v[i, j] = np.nan
+                out_x[i, j] = np.nan
+            out_stick[i] = np.nan
+            out_periods[i] = 0
+            if kind == 0:
+                px = P[PP_X]
+                py = P[PP_Y]
+            else:
+                px = P[RP_X]
+                py = P[RP_Y]
+            if min_normal_accel(mc, px, py, T, 4 * nscan) <= 0.0:
+                out_status[i] = CONTACT_LOST
+                continue
+            if kind == 0:
+                vscale = point_velocity_scale(mc, px, py)
+                wscale = 0.0
+                can = True if S[S_SKIP_STICK] <= 0.0 else point_can_stick(mc, P, px, py, T, nscan, W)
+                P[PP_CANSTICK] = 1.0 if can else 0.0
+                P[PP_VSCALE] = vscale
+            else:
+                rigid_geometry(P, P[RP_TH], W)
+                vscale, wscale = rigid_scales(mc, P, px, py, W)
+                can = True if S[S_SKIP_STICK] <= 0.0 else rigid_can_stick(mc, P, px, py, T, nscan, W)
+                P[RP_CANSTICK] = 1.0 if can else 0.0
+                P[RP_VSCALE] = vscale
+                P[RP_WSCALE] = wscale
+            for j in range(dim):
+                sc[j] = 0.0
+                if kind == 1 and j == 2:
+                    sc[dim + j] = S[S_RTOL] * wscale + S[S_ATOL_W]
+                    tolv[j] = S[S_FP_RTOL] * wscale + S[S_FP_ATOL_W]
+                else:
+                    sc[dim + j] = S[S_RTOL] * vscale + S[S_ATOL_V]
+                    tolv[j] = S[S_FP_RTOL] * vscale + S[S_FP_ATOL_V]
+            zero_tol = zero_tolerance(S, vscale)
+            if kind == 1:
+                P[RP_ZTOL] = max(zero_tol, 100.0 * sc[3])
+            else:
+                P[PP_KAPPA] = 100.0 * sc[2]
+            # Starting guess: the caller's, else the neighbour's limit cycle, else rest.
+            for j in range(dim):
+                x0[j] = X0[i, j] if has_x0[i] else (warm[j] if have_warm else 0.0)
+            # Far outside the hull the one-period map only decelerates the part towards it; start
+            # at 4 velocity scales instead (the limit cycle is unique for point parts).
+            lim = 4.0 * vscale + 1e-12
+            sp = math.hypot(x0[0], x0[1])
+            if sp > lim:
+                x0[0] *= lim / sp
+                x0[1] *= lim / sp
+            if kind == 1 and abs(x0[2]) > 4.0 * wscale + 1e-12:
+                x0[2] = math.copysign(4.0 * wscale, x0[2])
+            st = OK
+            if kind == 0 and S[S_CLOSED_FORM] > 0.0:
+                lin, ex, ey = collinear_direction(mc, px, py)
+            else:
+                lin, ex, ey = False, 1.0, 0.0
+            if lin:
+                c1 = line_table(mc, px, py, ex, ey)
+                st, lam_avg, lam_start, periods = line_solve(
+                    c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
+                    S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats)
+                vres[0] = lam_avg * ex
+                vres[1] = lam_avg * ey
+                xres[0] = lam_start * ex
+                xres[1] = lam_start * ey
+                frac = stats[0] / T
+            else:
+                st, periods, frac, h = fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew,
+                                                   ybest, W, sc, n, dim, tolv, zero_tol, vres, xres, stats)
+                if st == OK and kind == 1 and S[S_STARTS] > 1.5:
+                    st, extra = _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc,
+                                              tolv, zero_tol, vres, vscale, wscale, stats)
+                    periods += extra
+            out_status[i] = st
+            out_periods[i] = periods
+            if st == OK:
+                for j in range(dim):
+                    out_v[i, j] = vres[j]
+                    out_x[i, j] = xres[j]
+                out_stick[i] = frac
+                if S[S_WARM] > 0.0:
+                    for j in range(dim):
+                        warm[j] = xres[j]
+                    have_warm = True
+
+
+@njit(cache=True, error_model="numpy")
+def _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, tolv, zero_tol, vres,
+                  vscale, wscale, stats):
+    """Rigid parts: solve again from other initial twists; disagreement is reported, not hidden."""
+    nst = int(S[S_STARTS])
+    x0 = np.zeros(3)
+    v2 = np.zeros(3)
+    x2 = np.zeros(3)
+    total = 0
+    for s in range(1, nst):
+        ang = 2.0 * math.pi * s / nst
+        x0[0] = vscale * math.cos(ang)
+        x0[1] = vscale * math.sin(ang)
+        x0[2] = wscale if s % 2 else -wscale
+        st, periods, _, h = fixed_point(1, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, 6,
+                                        3, tolv, zero_tol, v2, x2, stats)
+        total += periods
+        if st != OK:
+            return st, total
+        for j in range(3):
+            if abs(v2[j] - vres[j]) > 10.0 * tolv[j]:
+                return STARTS_DISAGREE, total
+    return OK, total

@@ -1,10 +1,10 @@
 """Shared fixtures for the physics tests: suite motions (config/motions) and common parts."""
 
 import pytest
-from physics_suite import CONFIG, suite_motion
 
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, load_part
+from tests.physics.physics_suite import CONFIG, suite_motion
 
 
 @pytest.fixture(scope="session")

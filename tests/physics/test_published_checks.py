@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 import pytest
-from physics_suite import suite_motion
 
 from ppod_ros.physics import SolverSettings, grid_configs, solve_field
+from tests.physics.physics_suite import suite_motion
 
 CLOSED = SolverSettings(cache=False)
 ODE = SolverSettings(cache=False, closed_form=False, rtol=1e-8, fixed_point_rtol=1e-7)

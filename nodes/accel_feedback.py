@@ -31,7 +31,7 @@ from ppod_nodes.common.convert import motion_from_msg, phasors_to_msg
 from ppod_nodes.common.lifecycle import PpodLifecycleNode
 from ppod_nodes.common.params import Param
 from ppod_nodes.common.runner import make_main
-from ppod_ros.can import DeviceLink, open_bus
+from ppod_ros.can import DeviceLink, open_bus_waiting
 from ppod_ros.control import CorrectionStore, LearningSettings
 from ppod_ros.control.online import FeedbackLoop, LoopOutput, OnlineSettings
 from ppod_ros.device import load_device_config
@@ -43,6 +43,7 @@ class AccelFeedbackNode(PpodLifecycleNode):
     PARAMS = (
         Param("device_config", "", "device description YAML; empty: the packaged default"),
         Param("can_interface", "", "override can.interface"),
+        Param("bus_wait_s", 10.0, "keep trying to open the bus this long at configure (s)", min_value=0.0),
         Param("can_channel", "", "override can.channel"),
         Param("control", True, "send corrections (false: estimate and publish only)"),
         Param("summaries_per_estimate", 3, "device summaries averaged per estimate", min_value=1, max_value=64),
@@ -76,7 +77,7 @@ class AccelFeedbackNode(PpodLifecycleNode):
         learning = LearningSettings.from_dict({"gain": params["gain"], "tolerance": params["tolerance"]})
         cache = Path(params["cache_dir"]).expanduser() if params["cache_dir"] else Path.home() / ".cache" / "ppod"
         self.loop = FeedbackLoop(config, settings, learning, store=CorrectionStore(cache))
-        self.bus = open_bus(config.can)
+        self.bus = open_bus_waiting(config.can, params["bus_wait_s"])
         self.link = DeviceLink(self.bus, config)
         self.link.on_summary.append(self._on_summary)
         self.link.start()  # receive only: no handshake, no heartbeat; the generator owns the device

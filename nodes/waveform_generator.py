@@ -32,7 +32,7 @@ from ppod_nodes.common.params import Param
 from ppod_nodes.common.runner import make_main
 from ppod_ros.actuation.generator import GeneratorState, GoalOutcome, WaveformGenerator
 from ppod_ros.actuation.planning import GoalPlanner
-from ppod_ros.can import DeviceLink, open_bus, send_estop
+from ppod_ros.can import DeviceLink, open_bus, open_bus_waiting, send_estop
 from ppod_ros.device import load_device_config
 from ppod_ros.errors import ConfigError, DeviceError
 from ppod_ros.motion import PlateMotion
@@ -44,7 +44,11 @@ class WaveformGeneratorNode(PpodLifecycleNode):
     PARAMS = (
         Param("device_config", "", "device description YAML; empty: the packaged default (docs/device.md)"),
         Param("can_interface", "", "override can.interface (virtual, remote, socketcan, ...)"),
+        Param("bus_wait_s", 10.0, "keep trying to open the bus this long at configure (s)", min_value=0.0),
         Param("can_channel", "", "override can.channel (e.g. ws://127.0.0.1:54701/ for the simulator)"),
+        Param("heartbeat_clock", "wall", "heartbeats on the wall clock from their own thread ('wall', for "
+              "real-time devices) or on the ROS clock ('ros': simulated time faster than real time)",
+              choices=("wall", "ros")),
         Param("handshake_timeout_s", 5.0, "wait for the device's VERSION reply (s)", min_value=0.1),
         Param("status_rate_hz", 10.0, "rate of PlateMotionStatus and DeviceStatus (Hz)", min_value=0.5,
               max_value=100.0),
@@ -75,7 +79,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         config = load_device_config(params["device_config"] or None)
         overrides = {k: params[f"can_{k}"] for k in ("interface", "channel") if params[f"can_{k}"]}
         self.config = config.with_can(**overrides) if overrides else config
-        self.bus = open_bus(self.config.can)
+        self.bus = open_bus_waiting(self.config.can, params["bus_wait_s"])
         self.link = DeviceLink(self.bus, self.config)
         try:
             self.link.start()
@@ -89,7 +93,11 @@ class WaveformGeneratorNode(PpodLifecycleNode):
                                f"{version.n_channels} accelerometer channels")
 
     def on_activate_node(self):
-        self._hb_timer = self.create_timer(self.config.can.heartbeat_period_s, self._heartbeat)
+        if self.params["heartbeat_clock"] == "ros":
+            self._hb_timer = self.create_timer(self.config.can.heartbeat_period_s, self._heartbeat)
+        else:
+            # Its own thread: a busy executor (or a slow callback) cannot starve the device watchdog.
+            self.link.start_heartbeat()
         self._subs = [
             self.create_subscription(PlateMotionMsg, topics.GOAL, self._on_goal_msg, qos.COMMANDS),
             self.create_subscription(HarmonicCorrection, topics.CORRECTION, self._on_correction, qos.COMMANDS),
@@ -110,6 +118,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         if self._hb_timer is not None:
             self.destroy_timer(self._hb_timer)
             self._hb_timer = None
+        self.link.stop_heartbeat()
         self._publish_status()
 
     def on_cleanup_node(self):

@@ -182,7 +182,8 @@ class SimDeviceNode(Node):
         self.world.close()
         w = self.world
         self.get_logger().info(f"simulated {w.device.time_s:.1f} s of device time; parts physics "
-                               f"{w.physics_s:.2f} s; {w.frames_rendered} frames rendered, {w.frames_dropped} dropped")
+                               f"{w.physics_s:.2f} s; {w.frames_rendered} frames rendered, {w.frames_dropped} dropped; "
+                               f"device clock at most {1e3 * w.process.pacer.max_lag_s:.0f} ms behind real time")
 
 
 main = make_main(SimDeviceNode)

@@ -96,7 +96,11 @@ class SimWorld:
         self._truth = self._snapshot(self.dynamics.state)
         self._render_thread: threading.Thread | None = None
         self._stop_render = threading.Event()
-        self.device.cycle_callbacks.append(self._cycle)
+        # The parts are advanced in a thread of their own, fed each completed cycle: the device
+        # thread keeps its real-time pace (its heartbeat watchdog must not see physics stalls).
+        self._cycles: queue.Queue = queue.Queue()
+        self._physics_thread: threading.Thread | None = None
+        self.device.cycle_callbacks.append(self._cycles.put)
 
     @property
     def url(self) -> str:
@@ -111,7 +115,26 @@ class SimWorld:
         with self._lock:
             return self._truth
 
+    def _physics_loop(self) -> None:
+        while True:
+            truth = self._cycles.get()
+            if truth is None:
+                return
+            self._cycle(truth)
+
+    def drain(self, timeout_s: float = 5.0) -> None:
+        """Wait until the parts have caught up with every completed cycle."""
+        deadline = time.monotonic() + timeout_s
+        while self._cycles.unfinished_tasks and time.monotonic() < deadline:
+            time.sleep(0.005)
+
     def _cycle(self, truth: CycleTruth) -> None:
+        try:
+            self._advance_parts(truth)
+        finally:
+            self._cycles.task_done()
+
+    def _advance_parts(self, truth: CycleTruth) -> None:
         start, period = truth.start_time_s, 1.0 / truth.frequency_hz
         if self.fps > 0 and start >= self._next_tick_s - 1e-9:
             while self._next_tick_s <= start + 1e-9:
@@ -172,9 +195,15 @@ class SimWorld:
         if self.renderer is not None and self._render_thread is None:
             self._render_thread = threading.Thread(target=self._render_loop, daemon=True, name="sim-camera")
             self._render_thread.start()
+        if self._physics_thread is None:
+            self._physics_thread = threading.Thread(target=self._physics_loop, daemon=True, name="sim-parts")
+            self._physics_thread.start()
         self.process.run(stop, duration_s)
 
     def close(self) -> None:
+        if self._physics_thread is not None:
+            self._cycles.put(None)
+            self._physics_thread.join(timeout=5)
         self._stop_render.set()
         if self._render_thread is not None:
             self._render_thread.join(timeout=5)

@@ -58,5 +58,6 @@ def stamp_to_seconds(stamp: Time) -> float:
 
 
 def seconds_to_stamp(t_s: float) -> Time:
-    sec = math.floor(t_s)
-    return Time(sec=int(sec), nanosec=int(round((t_s - sec) * 1e9)) % 1_000_000_000)
+    """A builtin_interfaces/Time from seconds, rounded to the nanosecond (2.9999999999 s -> 3 s)."""
+    ns = round(t_s * 1e9)
+    return Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))

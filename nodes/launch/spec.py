@@ -11,16 +11,20 @@ Example (the packaged default is ``nodes/data/ppod_up.yaml``)::
         lifecycle: true                          # the launcher configures and activates it
         params: {heartbeat_period_s: 0.05}       # node parameters (nested keys allowed)
         sim_params: {can_channel: "ws://127.0.0.1:{sim_port}/"}  # merged over params with --sim;
-                                                 # {sim_port}: a free port the launcher picks
+                                                 # {sim_port}: a free port the launcher picks,
+                                                 # {data}: the packaged data folder (ppod_ros/data)
         hardware_params: {can_interface: socketcan}  # merged over params without --sim
         when: always                              # always | sim | hardware
         required: true                            # its death stops everything (default true)
+        ready: "CAN bridge on"                    # non-lifecycle nodes: a log line (regex) that says
+                                                  # it is up; later nodes wait for it
 
 Nodes start in list order and stop in reverse order.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -41,6 +45,7 @@ class NodeSpec:
     when: str = "always"
     required: bool = True
     args: tuple[str, ...] = ()
+    ready: str = ""
 
     def enabled(self, sim: bool) -> bool:
         return self.when == "always" or (self.when == "sim") == sim
@@ -129,7 +134,13 @@ def launch_spec_from_dict(data: dict[str, Any], origin: str = "launch config") -
             when=item.string("when", "always", choices=("always", "sim", "hardware")),
             required=item.boolean("required", True),
             args=tuple(args),
+            ready=item.string("ready", ""),
         )
+        if spec.ready:
+            try:
+                re.compile(spec.ready)
+            except re.error as exc:
+                raise ConfigError(f"{item.key_path('ready')}: not a valid regular expression: {exc}") from exc
         item.finish()
         nodes.append(spec)
     names = [n.name for n in nodes]

@@ -11,11 +11,13 @@ Used by ``ppod up``, ``ppod demo`` and the system tests::
 from __future__ import annotations
 
 import os
+import re
 import signal
 import socket
 import threading
 import time
 from dataclasses import replace
+from importlib import resources
 from pathlib import Path
 from typing import IO
 
@@ -49,7 +51,7 @@ class Stack:
             if key in self.env:
                 os.environ[key] = self.env[key]
         os.environ.pop("ROS_LOCALHOST_ONLY", None)
-        self.substitutions = {"sim_port": free_port()}
+        self.substitutions = {"sim_port": free_port(), "data": str(resources.files("ppod_ros") / "data")}
         self.supervisor = Supervisor(self.env, sim, out=out, log_dir=log_dir, substitutions=self.substitutions)
         self.stop_event = threading.Event()
         self.failed: list[str] = []
@@ -92,13 +94,15 @@ class Stack:
         runfile.write({"sim": self.sim, "nodes": [n.name for n in self.nodes],
                        "sim_bridge": f"ws://127.0.0.1:{self.substitutions['sim_port']}/" if self.sim else None})
         managed = [n for n in self.nodes if n.lifecycle]
-        if not (activate and managed):
-            return
-        from ppod_nodes.launch.lifecycle_client import LifecycleClient
+        if activate and managed:
+            from ppod_nodes.launch.lifecycle_client import LifecycleClient
 
-        self._lifecycle = LifecycleClient()
-        for node in managed:
-            self._bring_up(node)
+            self._lifecycle = LifecycleClient()
+        for node in self.nodes:  # in order: a node may need the ones before it (the simulator's bus)
+            if node.ready:
+                self._wait_ready(node)
+            if node.lifecycle and self._lifecycle is not None:
+                self._bring_up(node)
         self.supervisor.say("all nodes up: " + ", ".join(
             f"{n.name} ({'active' if n.lifecycle else 'running'})" for n in self.nodes))
 
@@ -117,6 +121,18 @@ class Stack:
                 self._check_alive()
                 raise DeviceError(f"{node.name}: {transition} failed (see its log above)")
         self._check_alive()
+
+    def _wait_ready(self, node: NodeSpec) -> None:
+        rx = re.compile(node.ready)
+        child = next(c for c in self.supervisor.children if c.spec.name == node.name)
+        deadline = time.monotonic() + self.spec.lifecycle_timeout_s
+        while not any(rx.search(line) for line in list(child.lines)):
+            self._check_alive()
+            if self.stop_event.wait(0.05):
+                raise DeviceError("interrupted while starting")
+            if time.monotonic() > deadline:
+                raise DeviceError(f"{node.name}: not ready ('{node.ready}' not logged) within "
+                                  f"{self.spec.lifecycle_timeout_s:g} s")
 
     def _check_alive(self) -> None:
         dead = self.supervisor.dead_children()

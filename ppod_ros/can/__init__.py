@@ -10,7 +10,7 @@
 """
 
 from ppod_ros.can.assembly import AccelSummary, RawAssembler, RawCapture, SummaryAssembler
-from ppod_ros.can.bus import open_bus
+from ppod_ros.can.bus import open_bus, open_bus_waiting
 from ppod_ros.can.faults import FaultInjectingBus
 from ppod_ros.can.host import DeviceLink, DeviceSnapshot, send_estop
 from ppod_ros.can.protocol import PROTOCOL_VERSION, AckResult, Command, DeviceState, Fault
@@ -29,5 +29,6 @@ __all__ = [
     "RawCapture",
     "SummaryAssembler",
     "open_bus",
+    "open_bus_waiting",
     "send_estop",
 ]

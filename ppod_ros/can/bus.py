@@ -14,6 +14,7 @@ other          any python-can interface (``pcan``, ``kvaser``, ``vector``, ``slc
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any
 from urllib.parse import urlparse
@@ -96,4 +97,22 @@ def open_bus(
         raise DeviceError(f"cannot open the {interface} bus on {channel!r}: {exc}") from exc
 
 
-__all__ = ["BACKENDS", "backend_names", "open_bus"]
+
+
+def open_bus_waiting(settings: CanSettings, wait_s: float, retry_s: float = 0.2, **overrides: Any) -> can.BusABC:
+    """:func:`open_bus`, retrying for up to ``wait_s`` while the bus cannot be opened yet.
+
+    For a device that is still coming up (the simulator's bridge while its process starts, a USB
+    adapter being enumerated). Configuration errors are not retried.
+    """
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            return open_bus(settings, **overrides)
+        except DeviceError:
+            if time.monotonic() + retry_s > deadline:
+                raise
+            time.sleep(retry_s)
+
+
+__all__ = ["BACKENDS", "backend_names", "open_bus", "open_bus_waiting"]

@@ -151,6 +151,7 @@ class DeviceLink:
         self._thread: threading.Thread | None = None
         self._hb_thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._hb_stop = threading.Event()
 
     # ------------------------------------------------------------------ sending
     def _send(self, msg: can.Message) -> None:
@@ -427,8 +428,21 @@ class DeviceLink:
         self._thread = threading.Thread(target=self._rx_loop, name="ppod-can-rx", daemon=True)
         self._thread.start()
         if heartbeat:
-            self._hb_thread = threading.Thread(target=self._hb_loop, name="ppod-can-heartbeat", daemon=True)
-            self._hb_thread.start()
+            self.start_heartbeat()
+
+    def start_heartbeat(self) -> None:
+        """Send heartbeats every ``can.heartbeat_period_s`` of wall-clock time from a thread of their own."""
+        if self._hb_thread is not None:
+            return
+        self._hb_stop.clear()
+        self._hb_thread = threading.Thread(target=self._hb_loop, name="ppod-can-heartbeat", daemon=True)
+        self._hb_thread.start()
+
+    def stop_heartbeat(self) -> None:
+        self._hb_stop.set()
+        if self._hb_thread is not None:
+            self._hb_thread.join(timeout=2.0)
+        self._hb_thread = None
 
     def _rx_loop(self) -> None:
         while not self._stop.is_set():
@@ -437,21 +451,21 @@ class DeviceLink:
     def _hb_loop(self) -> None:
         period = self.config.can.heartbeat_period_s
         next_t = time.monotonic()
-        while not self._stop.is_set():
+        while not (self._stop.is_set() or self._hb_stop.is_set()):
             try:
                 self.heartbeat()
             except DeviceError as exc:
                 log.warning("heartbeat not sent: %s", exc)
             next_t += period
-            self._stop.wait(max(0.0, next_t - time.monotonic()))
+            self._hb_stop.wait(max(0.0, next_t - time.monotonic()))
 
     def stop(self) -> None:
         """Stop the background threads (the bus stays open: the caller owns it)."""
         self._stop.set()
-        for t in (self._thread, self._hb_thread):
-            if t is not None:
-                t.join(timeout=2.0)
-        self._thread = self._hb_thread = None
+        self.stop_heartbeat()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        self._thread = None
 
 
 __all__ = ["DeviceLink", "DeviceSnapshot", "LinkCounters", "fault_names", "send_estop"]

@@ -213,3 +213,21 @@ def test_settings_are_validated():
         LearningSettings(gain=2.5)
     with pytest.raises(ConfigError, match="divergence_iterations"):
         LearningSettings(divergence_iterations=0)
+
+
+def test_noise_growing_below_the_tolerance_is_not_divergence():
+    import numpy as np
+
+    from ppod_ros.control import DeviceLimits, LearningController, PlantModel
+    from ppod_ros.motion import PlateMotion
+
+    goal = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0])
+    plant = PlantModel.from_table(30.0, {k: 20.0 * np.eye(6) for k in (1, 2, 3)})
+    ctrl = LearningController(goal, plant, DeviceLimits(max_current_a=50.0, max_step_a=5.0))
+    table = goal.phasor_table(3)
+    for err in (0.0004, 0.0005, 0.0006, 0.0007, 0.0008):
+        step = ctrl.update(table * (1 + err))
+        assert step.state != "diverged" and not step.ramp_down
+    for err in (0.05, 0.06, 0.07, 0.08):  # the same growth above the tolerance is divergence
+        step = ctrl.update(table * (1 + err))
+    assert step.state == "diverged" and step.ramp_down

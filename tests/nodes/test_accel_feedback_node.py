@@ -8,10 +8,10 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 def test_feedback_drives_the_plate_to_the_goal_within_one_percent(ros, tmp_path):
-    from rclpy.parameter import Parameter
-
     from ppod_msgs.msg import HarmonicCorrection, PlateAcceleration
     from ppod_msgs.srv import SetPlateMotion
+    from rclpy.parameter import Parameter
+
     from ppod_nodes.accel_feedback import AccelFeedbackNode
     from ppod_nodes.common import qos, topics
     from ppod_nodes.common.convert import motion_to_msg

@@ -69,3 +69,12 @@ def test_motion_message_round_trip_and_validation():
     msg.harmonics[1].k = 1
     with pytest.raises(ConfigError, match="at most once"):
         motion_from_msg(msg)
+
+
+def test_stamps_round_to_the_nanosecond_without_losing_a_second():
+    from ppod_nodes.common.convert import seconds_to_stamp, stamp_to_seconds
+
+    for t in (0.0, 2.9999999999, 3.0, 12.3456789012, 1e6 + 0.5):
+        stamp = seconds_to_stamp(t)
+        assert 0 <= stamp.nanosec < 1_000_000_000
+        assert abs(stamp_to_seconds(stamp) - t) <= 1e-9 * max(1.0, t) + 1e-9

@@ -1,0 +1,112 @@
+"""System tests: real processes (`ppod up --sim`), the simulated device over the localhost CAN bridge."""
+
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from tests.system.stack import FEEDBACK, GENERATOR, SIM, log_text, node, running_stack
+
+pytestmark = [pytest.mark.system, pytest.mark.ros, pytest.mark.slow]
+
+LINESINKX = "name: LineSinkX\nfrequency_hz: 30\nramp_time_s: 0.3\nharmonics:\n" \
+            "  - {k: 1, amplitude: [10, 0, 0, 0, 100, 0], phase: [0, 0, 0, 0, 4.71238898, 0]}\n"
+
+
+def _send_goal(session, text=LINESINKX):
+    from ppod_msgs.srv import SetPlateMotion
+
+    from ppod_nodes.common import topics
+    from ppod_nodes.common.convert import motion_to_msg
+    from ppod_ros.motion import PlateMotion
+
+    goal = PlateMotion.from_yaml_text(text)
+    resp = session.call(SetPlateMotion, "/" + topics.SET_MOTION, SetPlateMotion.Request(motion=motion_to_msg(goal)),
+                        timeout_s=15)
+    assert resp.accepted, resp.reason
+    return goal
+
+
+def _truth_error(msg, goal) -> float:
+    from ppod_ros.motion import acceleration_error
+
+    measured = np.array([np.asarray(h.amplitude) * np.exp(1j * np.asarray(h.phase)) for h in msg.measured])
+    return acceleration_error(goal.phasor_table(measured.shape[0]), measured)[1]
+
+
+def _collect(session, msg_type, topic, qos):
+    got = []
+    session.node.create_subscription(msg_type, topic, got.append, qos)
+    return got
+
+
+def test_linesinkx_on_the_plant_without_mismatch_is_within_one_percent(tmp_path):
+    from ppod_msgs.msg import PlateAcceleration, PlateMotionStatus
+
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.session import RosSession
+
+    with running_stack(tmp_path, [node(SIM, mismatch="zero"), GENERATOR]), RosSession("system_test") as ros:
+        truth = _collect(ros, PlateAcceleration, topics.SIM_TRUE_ACCELERATION, qos.STREAM)
+        status = _collect(ros, PlateMotionStatus, topics.MOTION_STATUS, qos.LATCHED)
+        goal = _send_goal(ros)
+        assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_ACTIVE for s in status), 15)
+        n = len(truth)
+        assert ros.wait_until(lambda: len(truth) >= n + 10, 15)  # a second of steady state
+        errors = [_truth_error(m, goal) for m in truth[-10:]]
+    assert max(errors) <= 0.01, (errors, log_text(tmp_path)[-3000:])
+
+
+def test_sigkill_of_the_waveform_generator_brings_the_plate_to_rest_within_300_ms(tmp_path):
+    from ppod_msgs.msg import PlateAcceleration, PlateMotionStatus
+    from rosgraph_msgs.msg import Clock
+
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.convert import stamp_to_seconds
+    from ppod_nodes.common.session import RosSession
+
+    nodes = [SIM, {**GENERATOR, "required": False}]
+    with running_stack(tmp_path, nodes) as stack, RosSession("system_test") as ros:
+        truth = _collect(ros, PlateAcceleration, topics.SIM_TRUE_ACCELERATION, qos.STREAM)
+        status = _collect(ros, PlateMotionStatus, topics.MOTION_STATUS, qos.LATCHED)
+        clock = _collect(ros, Clock, "/clock", 10)
+        goal = _send_goal(ros)
+        assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_ACTIVE for s in status), 15)
+        assert ros.wait_until(lambda: len(clock) > 0, 5)
+        pid = next(c.process.pid for c in stack.supervisor.children if c.spec.name == "waveform_generator")
+        os.kill(pid, signal.SIGKILL)
+        killed_device_s = stamp_to_seconds(clock[-1].clock)  # the last heartbeat was sent before this
+        assert ros.wait_until(lambda: truth and stamp_to_seconds(truth[-1].header.stamp) > killed_device_s + 0.8, 15)
+        before = [_truth_error(m, goal) for m in truth if stamp_to_seconds(m.header.stamp) < killed_device_s - 0.05]
+        after = [m for m in truth if stamp_to_seconds(m.header.stamp) >= killed_device_s + 0.3]
+        time.sleep(0.5)
+    assert before and min(before) < 0.3  # the plate was running the goal
+    fund = np.linalg.norm(goal.phasor_table(1) * np.array([1, 1, 1, 0.1, 0.1, 0.1]))
+    residual = [np.linalg.norm(np.array([h.amplitude for h in m.measured]) * np.array([1, 1, 1, 0.1, 0.1, 0.1]))
+                / fund for m in after]
+    # At rest: drive at zero, only the suspension's decaying ringing left (< 5 % of the motion).
+    assert after and max(residual) < 0.05, residual
+    assert "waveform_generator stopped (killed by SIGKILL)" in log_text(tmp_path)
+
+
+def test_feedback_brings_the_mismatched_plate_within_one_percent_in_five_iterations(tmp_path):
+    from ppod_msgs.msg import PlateAcceleration
+
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.session import RosSession
+
+    nodes = [SIM, GENERATOR, node(FEEDBACK, cache_dir=str(tmp_path / "cache"))]
+    with running_stack(tmp_path, nodes), RosSession("system_test") as ros:
+        measured = _collect(ros, PlateAcceleration, topics.ACCELERATION, qos.STREAM)
+        truth = _collect(ros, PlateAcceleration, topics.SIM_TRUE_ACCELERATION, qos.STREAM)
+        goal = _send_goal(ros)
+        assert ros.wait_until(lambda: any(m.converged for m in measured), 30), \
+            [(m.iteration, round(m.error_relative, 4)) for m in measured]
+        first = next(m for m in measured if m.converged)
+        n = len(truth)
+        assert ros.wait_until(lambda: len(truth) >= n + 10, 15)
+        true_errors = [_truth_error(m, goal) for m in truth[-10:]]
+    assert first.iteration <= 5 and first.error_relative <= 0.01 and first.out_of_goal_relative <= 0.005
+    assert np.median(true_errors) <= 0.01, true_errors

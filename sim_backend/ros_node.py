@@ -85,8 +85,9 @@ class SimDeviceNode(Node):
         self._accel_pub = self.create_publisher(PlateAcceleration, topics.SIM_TRUE_ACCELERATION, qos.STREAM)
         scenario = self.create_publisher(String, SCENARIO, qos.LATCHED)
         scenario.publish(String(data=yaml.safe_dump({
-            "device_config": str(config.source), "device": config.name, "mismatch": p["mismatch"],
-            "seed": scene.seed if p["seed"] < 0 else p["seed"], "rate": p["rate"], "scene": scene.to_dict(),
+            "device_config": p["device_config"], "device": config.name, "mismatch": p["mismatch"],
+            "seed": scene.seed if p["seed"] < 0 else p["seed"], "rate": p["rate"], "camera": p["camera"],
+            "camera_config": p["camera_config"], "scene": scene.to_dict(),
             "bridge": self.world.url}, sort_keys=False)))
         if camera is not None:
             self._info_pub.publish(self._camera_info())

@@ -172,6 +172,8 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
     f = np.zeros(dim)
     q = 0
     prev = 1e300
+    best = 1e300
+    since = 0
     for it in range(maxp):
         for j in range(n):
             y[j] = 0.0
@@ -193,7 +195,14 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
         # The period started at x is off the limit cycle by up to |f| / (1 - q) for a map that
         # contracts by a rate estimated from the last two residuals (0.5 before there are two).
         rate = min(0.95, res / prev) if it > 0 else 0.5
-        if res / (1.0 - rate) <= 1.0:
+        # Converged; or stalled just above the tolerance, at the period map's own noise (set by the
+        # step tolerance): iterating on would not make the result any better.
+        if res < best:
+            best = res
+            since = 0
+        else:
+            since += 1
+        if res / (1.0 - rate) <= 1.0 or (since >= 3 and res <= 5.0):
             for j in range(dim):
                 out_v[j] = y[j] / T
                 out_x[j] = x[j]

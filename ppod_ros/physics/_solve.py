@@ -159,7 +159,7 @@ def rigid_scales(mc, P, sx, sy, W):
 
 @njit(cache=True, error_model="numpy")
 def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, n, dim, tolv,
-                zero_tol, out_v, out_x, stats):
+                zero_tol, vlim, wlim, out_v, out_x, stats):
     """Returns (status, periods, sticking fraction of the final period, step size)."""
     depth = int(S[S_DEPTH])
     maxp = int(S[S_MAX_PERIODS])
@@ -172,6 +172,8 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
     f = np.zeros(dim)
     q = 0
     prev = 1e300
+    best = 1e300
+    since = 0
     for it in range(maxp):
         for j in range(n):
             y[j] = 0.0
@@ -190,19 +192,35 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
         for j in range(dim):
             f[j] = y[dim + j] - x[j]
             res = max(res, abs(f[j]) / tolv[j])
-        # The period started at x is off the limit cycle by up to |f| / (1 - q) for a map that
-        # contracts by a rate estimated from the last two residuals (0.5 before there are two).
-        rate = min(0.95, res / prev) if it > 0 else 0.5
-        if res / (1.0 - rate) <= 1.0:
+        # The period started at x is off the limit cycle by up to |f| / (1 - rate) for a map that
+        # contracts by ``rate``, estimated from the last two residuals: so at least two periods
+        # (a weakly contracting map, e.g. tiny friction or huge amplitudes, has small residuals far
+        # from its fixed point).
+        rate = min(0.999, res / prev) if it > 0 else 1.0
+        # Converged; or stalled just above the tolerance, at the period map's own noise (set by the
+        # step tolerance): iterating on would not make the result any better.
+        if res < best:
+            best = res
+            since = 0
+        else:
+            since += 1
+        if res / (1.0 - rate) <= 1.0 or (since >= 3 and res <= 5.0):
             for j in range(dim):
                 out_v[j] = y[j] / T
                 out_x[j] = x[j]
             return OK, it + 1, stats[0] / T, h
-        if res >= prev:
-            q = 0  # no progress: restart the acceleration (plain step below)
+        if res >= 4.0 * prev:
+            q = 0  # diverging: restart the acceleration (plain step below)
         prev = res
         q = _push(Xh, Fh, q, depth, x, f)
         _anderson(Xh, Fh, q, dim, tolv, x)
+        # The limit cycle stays within the plate's velocities (within vlim, wlim: point parts by
+        # the theorem, rigid parts in practice). Far out the map only translates (the part
+        # decelerates) and extrapolating it would wander: outside the bound take the plain step.
+        if math.hypot(x[0], x[1]) > vlim or (dim == 3 and abs(x[2]) > wlim):
+            for j in range(dim):
+                x[j] = Xh[q - 1, j] + Fh[q - 1, j]
+            q = 0
     return NOT_CONVERGED, maxp, 0.0, h
 
 
@@ -255,8 +273,10 @@ def _anderson(Xh, Fh, q, dim, tolv, x):
             corr += g[a] * ((Xh[a + 1, j] - Xh[a, j]) + (Fh[a + 1, j] - Fh[a, j]))
         step = max(step, abs(Fh[k, j] - corr) / tolv[j])
         plain = max(plain, abs(Fh[k, j]) / tolv[j])
-    if not (step <= 20.0 * plain):
-        return  # a wild extrapolation: keep the plain step
+    if not (step <= 1e4 * plain):
+        # A wild extrapolation: keep the plain step. (Large ones are legitimate: a map that barely
+        # contracts, rate 0.999 say, has its fixed point 1000 residuals away.)
+        return
     for j in range(dim):
         corr = 0.0
         for a in range(m):
@@ -362,7 +382,9 @@ def solve_batch(kind, mc, Pall, X0, has_x0, T, kmax, A, B, C, E, E3, S, out_v, o
                 frac = stats[0] / T
             else:
                 st, periods, frac, h = fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew,
-                                                   ybest, W, sc, n, dim, tolv, zero_tol, vres, xres, stats)
+                                                   ybest, W, sc, n, dim, tolv, zero_tol,
+                                                   (1.0 if kind == 0 else 2.0) * vscale + 1e-12,
+                                                   2.0 * wscale + 1e-12, vres, xres, stats)
                 if st == OK and kind == 1 and S[S_STARTS] > 1.5:
                     st, extra = _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc,
                                               tolv, zero_tol, vres, vscale, wscale, stats)
@@ -395,7 +417,8 @@ def _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, t
         x0[1] = vscale * math.sin(ang)
         x0[2] = wscale if s % 2 else -wscale
         st, periods, _, h = fixed_point(1, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, 6,
-                                        3, tolv, zero_tol, v2, x2, stats)
+                                        3, tolv, zero_tol, 2.0 * vscale + 1e-12, 2.0 * wscale + 1e-12, v2, x2,
+                                        stats)
         total += periods
         if st != OK:
             return st, total

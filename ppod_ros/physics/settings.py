@@ -92,7 +92,7 @@ class SolverSettings:
     fixed_point: str = "anderson"
     anderson_depth: int = 2
     rtol: float = 1e-6
-    rigid_rtol: float = 1e-7
+    rigid_rtol: float = 1e-8
     atol_mps: float = 1e-12
     atol_radps: float = 1e-10
     fixed_point_rtol: float = 1e-5

@@ -1,0 +1,363 @@
+"""Accuracy versus time of the asymptotic solver, against a converged reference and a plain
+scipy.integrate.solve_ivp baseline; what the skipping saves; full-dynamics speed.
+
+Point parts (mu 0.3) on a 51 x 51 grid over [-0.1, 0.1]^2 m for every suite motion of
+config/motions; the PHYSICS.md rigid part on 7 x 7 x 7 configurations under RigidU1. The reference
+is the solver's "reference" preset (8th-order Dormand-Prince, step tolerance 1e-12, the closed form
+switched off so that collinear motions are checked against integration too), cached under --out
+keyed by its settings, motion, part and grid. The baseline is what a user would write: solve_ivp
+(RK45, rtol 1e-9, atol 1e-12) on s' = -mu n w/|w|, period after period until the period average
+changes by less than 1e-8 m/s or 200 periods, on a fixed random subset of valid configurations.
+
+examples:
+  ppod bench solver --quick
+  ppod bench solver --out out/bench
+  ppod bench solver --baseline-configs 10 --motions Sink LineSinkX
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import time
+from pathlib import Path
+
+import numpy as np
+
+HELP = "asymptotic solver: Pareto table vs a converged reference, solve_ivp baseline, skipping, dynamics"
+
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+POINT_MOTIONS = ["TranslateX", "RotateZ", "LineSinkX", "TwoHarmonicX", "Sink", "Whirlpool", "Swirl3H",
+                 "NearContactLoss", "StickingHeavy"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--quick", action="store_true",
+                        help="short run: 21 x 21 and 5 x 5 x 5 grids, 3 motions, 5 baseline configurations")
+    parser.add_argument("--grid", type=int, default=51, help="point grid size per axis (default 51)")
+    parser.add_argument("--rigid-grid", type=int, default=7, help="rigid grid size per axis (default 7)")
+    parser.add_argument("--baseline-configs", type=int, default=25, help="configurations per motion for solve_ivp")
+    parser.add_argument("--motions", nargs="+", metavar="NAME", help=f"point motions (default: {POINT_MOTIONS})")
+    parser.add_argument("--repeat", type=int, default=3, help="timed repetitions, best kept (default 3)")
+    parser.add_argument("--seed", type=int, default=2024, help="seed of the baseline subset")
+
+
+# ------------------------------------------------------------------ settings compared
+
+
+def _point_settings():
+    from ppod_ros.physics import PRESETS, SolverSettings
+
+    return {
+        "fast": PRESETS["fast"],
+        "default": PRESETS["default"],
+        "rtol 1e-7": SolverSettings(rtol=1e-7, fixed_point_rtol=1e-6),
+        "bs3 rtol 1e-6": SolverSettings(integrator="bs3", fixed_point_rtol=1e-5),
+        "dop853 rtol 1e-8": SolverSettings(integrator="dop853", rtol=1e-8, fixed_point_rtol=1e-7),
+        "accurate": PRESETS["accurate"],
+        "default, picard": SolverSettings(fixed_point="picard"),
+        "default, no closed form": SolverSettings(closed_form=False),
+    }
+
+
+def _rigid_settings():
+    from ppod_ros.physics import PRESETS, SolverSettings
+
+    return {
+        "fast": PRESETS["fast"],
+        "default": PRESETS["default"],
+        "rigid_rtol 1e-7": SolverSettings(rigid_rtol=1e-7),
+        "rigid_rtol 1e-9": SolverSettings(rigid_rtol=1e-9, fixed_point_rtol=1e-7),
+        "dop853 1e-9": SolverSettings(integrator="dop853", rigid_rtol=1e-9, fixed_point_rtol=1e-7),
+        "accurate": PRESETS["accurate"],
+    }
+
+
+# ------------------------------------------------------------------ helpers
+
+
+def _timed(motion, part, cfg, settings, repeat, **kw):
+    from ppod_ros.physics import solve_field
+
+    best = None
+    for _ in range(max(1, repeat)):
+        r = solve_field(motion, part, cfg, settings.replace(cache=False), **kw)
+        if best is None or r.seconds < best.seconds:
+            best = r
+    return best
+
+
+def _errors(r, ref):
+    both = r.valid & ref.valid
+    d = np.abs(r.velocity[both] - ref.velocity[both])
+    ev = float(d[:, :2].max()) if both.any() else 0.0
+    ew = float(d[:, 2].max()) if both.any() and d.shape[1] == 3 else float("nan")
+    return ev, ew, int((r.valid != ref.valid).sum())
+
+
+def _reference(motion, part, cfg, out: Path):
+    """The reference preset's field, cached under out/reference keyed by everything it depends on."""
+    from ppod_ros.physics import PRESETS, solve_field
+
+    ref = PRESETS["reference"]
+    h = hashlib.sha1()
+    for item in (motion.key, repr(part.key).encode(), cfg.tobytes(), repr(ref.cache_key()).encode()):
+        h.update(item)
+    path = out / "reference" / f"{motion.name or 'motion'}-{h.hexdigest()[:16]}.npz"
+    if path.exists():
+        z = np.load(path)
+        return _Stored(z["velocity"], z["valid"], float(z["seconds"])), True
+    r = solve_field(motion, part, cfg, ref)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, velocity=r.velocity, valid=r.valid, seconds=r.seconds)
+    return _Stored(r.velocity, r.valid, r.seconds), False
+
+
+class _Stored:
+    def __init__(self, velocity, valid, seconds):
+        self.velocity = velocity
+        self.valid = valid
+        self.seconds = seconds
+
+
+def baseline_average(motion, mu, x, y):
+    """The plain solve_ivp baseline at one point: (period-average velocity (2,), periods)."""
+    from scipy.integrate import solve_ivp
+
+    from ppod_ros.motion import point_kinematics
+
+    T = motion.period_s
+
+    def rhs(t, s):
+        k = point_kinematics(motion, x, y, t)
+        w = s - k["v_h"]
+        nw = np.hypot(w[0], w[1])
+        return -mu * (9.81 + k["a_n"]) * (w / nw if nw > 0 else 0.0 * w)
+
+    s = np.zeros(2)
+    last = None
+    for p in range(200):
+        sol = solve_ivp(rhs, (p * T, (p + 1) * T), s, method="RK45", rtol=1e-9, atol=1e-12, dense_output=True)
+        s = sol.y[:, -1]
+        tt = np.linspace(p * T, (p + 1) * T, 401)
+        avg = np.trapezoid(sol.sol(tt), tt, axis=1) / T
+        if last is not None and np.abs(avg - last).max() < 1e-8:
+            return avg, p + 1
+        last = avg
+    return last, 200
+
+
+def _table(title, header, rows):
+    widths = [max(len(str(h)), *(len(str(r[i])) for r in rows)) for i, h in enumerate(header)]
+    line = "  ".join(f"{h:>{w}}" for h, w in zip(header, widths))
+    out = [f"\n== {title}", line, "-" * len(line)]
+    out += ["  ".join(f"{str(c):>{w}}" for c, w in zip(r, widths)) for r in rows]
+    text = "\n".join(out)
+    print(text, flush=True)
+    return text
+
+
+# ------------------------------------------------------------------ the run
+
+
+def run(args: argparse.Namespace) -> int:
+    from ppod_ros.motion import PlateMotion
+    from ppod_ros.parts import PointPart, load_part
+    from ppod_ros.physics import PRESETS, PartDynamics, SolverSettings, grid_configs, solve_field
+    from ppod_ros.physics._params import ensure_compiled
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    quick = args.quick
+    n = 21 if quick else args.grid
+    nr = 5 if quick else args.rigid_grid
+    nb = 5 if quick else args.baseline_configs
+    names = args.motions or (["LineSinkX", "Sink", "StickingHeavy"] if quick else POINT_MOTIONS)
+    repeat = 1 if quick else args.repeat
+    texts = []
+
+    t0 = time.perf_counter()
+    setup = ensure_compiled()
+    print(f"set-up (numba compile or cache load): {setup:.2f} s ({time.perf_counter() - t0:.2f} s wall)")
+
+    part = PointPart(0.3)
+    xs = np.linspace(-0.1, 0.1, n)
+    cfg = grid_configs(xs, xs)
+    motions = {name: PlateMotion.from_yaml(CONFIG / "motions" / f"{name}.yaml") for name in names}
+
+    # --- references ------------------------------------------------------------------------------
+    refs = {}
+    for name, m in motions.items():
+        refs[name], cached = _reference(m, part, cfg, out)
+        print(f"reference {name}: {'cached' if cached else f'computed in {refs[name].seconds:.1f} s'}", flush=True)
+
+    # --- Pareto, point parts -----------------------------------------------------------------------
+    settings = _point_settings()
+    results = {}
+    rows = []
+    for label, st in settings.items():
+        worst_t, worst_e, total, mism = 0.0, 0.0, 0.0, 0
+        for name, m in motions.items():
+            r = _timed(m, part, cfg, st, repeat)
+            ev, _, mm = _errors(r, refs[name])
+            results[(label, name)] = (r.seconds, ev, r)
+            worst_t, worst_e, total, mism = max(worst_t, r.seconds), max(worst_e, ev), total + r.seconds, mism + mm
+        rows.append([label, f"{worst_t:.3f}", f"{total:.3f}", f"{worst_e:.1e}", mism])
+    texts.append(_table(f"point part, {n} x {n} grid, all {len(motions)} motions: settings vs max error vs time",
+                        ["settings", "worst s/motion", "total s", "max err m/s", "validity mismatches"], rows))
+    rows = []
+    for name, m in motions.items():
+        s, ev, r = results[("default", name)]
+        rows.append([name, f"{s:.3f}", f"{ev:.1e}", int((~r.valid).sum()), f"{r.periods[r.valid].mean():.1f}",
+                     f"{np.nanmean(r.stick_fraction):.3f}", f"{results[('fast', name)][0]:.3f}",
+                     f"{results[('fast', name)][1]:.1e}"])
+    texts.append(_table(f"point part, default settings, per motion ({n} x {n})",
+                        ["motion", "seconds", "max err m/s", "invalid", "periods", "stick frac",
+                         "fast s", "fast err"], rows))
+
+    # --- rigid ---------------------------------------------------------------------------------------
+    rigid = load_part(CONFIG / "parts" / "published_rigid.yaml")
+    u1 = PlateMotion.from_yaml(CONFIG / "motions" / "RigidU1.yaml")
+    rcfg = grid_configs(np.linspace(-0.06, 0.06, nr), np.linspace(-0.06, 0.06, nr),
+                        np.linspace(0, 2 * np.pi, nr, endpoint=False))
+    rref, cached = _reference(u1, rigid, rcfg, out)
+    print(f"reference rigid: {'cached' if cached else f'computed in {rref.seconds:.1f} s'}", flush=True)
+    rows = []
+    rigid_results = {}
+    for label, st in _rigid_settings().items():
+        r = _timed(u1, rigid, rcfg, st, repeat)
+        ev, ew, mm = _errors(r, rref)
+        rigid_results[label] = (r.seconds, ev, ew)
+        rows.append([label, f"{r.seconds:.3f}", f"{ev:.1e}", f"{ew:.1e}", mm, f"{r.periods[r.valid].mean():.1f}"])
+    texts.append(_table(f"rigid part (PHYSICS.md), RigidU1, {len(rcfg)} configurations",
+                        ["settings", "seconds", "max err m/s", "max err rad/s", "mismatches", "periods"], rows))
+
+    # --- baseline --------------------------------------------------------------------------------------
+    rng = np.random.default_rng(args.seed)
+    rows = []
+    base_points = []
+    for name, m in motions.items():
+        ok = np.flatnonzero(refs[name].valid)
+        pick = np.sort(rng.choice(ok, size=min(nb, ok.size), replace=False))
+        sub = cfg[pick]
+        tb = time.perf_counter()
+        bv = np.array([baseline_average(m, 0.3, x, y)[0] for x, y in sub])
+        t_base = (time.perf_counter() - tb) / len(sub)
+        e_base = float(np.abs(bv - refs[name].velocity[pick]).max())
+        # Ours on the same configurations: the cheapest settings at equal or better error.
+        best = None
+        for label, st in settings.items():
+            r = _timed(m, part, sub, st, repeat)
+            e = float(np.abs(r.velocity - refs[name].velocity[pick]).max()) if r.valid.all() else np.inf
+            if e <= e_base and (best is None or r.seconds < best[1]):
+                best = (label, r.seconds, e)
+        if best is None:
+            rows.append([name, len(sub), f"{t_base:.3f}", f"{e_base:.1e}", "-", "-", "-", "-", "-"])
+            continue
+        t_ours = best[1] / len(sub)
+        t_grid = results[("default", name)][0] / len(cfg)
+        base_points.append((t_base, e_base))
+        rows.append([name, len(sub), f"{t_base:.3f}", f"{e_base:.1e}", best[0], f"{t_ours * 1e3:.3f}", f"{best[2]:.1e}",
+                     f"{t_base / t_ours:.0f}", f"{t_base / t_grid:.0f}"])
+    texts.append(_table("solve_ivp baseline (RK45 1e-9/1e-12, period averages to 1e-8 m/s) vs this solver",
+                        ["motion", "configs", "baseline s/config", "baseline max err", "ours: cheapest at <= err",
+                         "ours ms/config", "ours max err", "ratio (same configs)", "ratio (default, grid)"], rows))
+
+    # --- skipping ------------------------------------------------------------------------------------
+    rows = []
+    sink = PlateMotion.from_yaml(CONFIG / "motions" / "Sink.yaml")
+    padded = PlateMotion(sink.frequency_hz, np.arange(1, 11), np.vstack([sink.amplitude, np.zeros((9, 6))]),
+                         np.vstack([sink.phase, np.zeros((9, 6))]))
+    d = PRESETS["default"]
+    for label, (m, a, b) in {
+        "zero harmonics 2..10 (Sink): pruned vs kept": (padded, d, d.replace(prune_harmonics=False)),
+        "collinear a_h (RotateZ): closed form vs integrated": (
+            PlateMotion.from_yaml(CONFIG / "motions" / "RotateZ.yaml"), d, d.replace(closed_form=False)),
+        "collinear a_h (LineSinkX): closed form vs integrated": (
+            PlateMotion.from_yaml(CONFIG / "motions" / "LineSinkX.yaml"), d, d.replace(closed_form=False)),
+        "sticking provably impossible (Sink): skipped vs checked": (sink, d, d.replace(skip_sticking=False)),
+    }.items():
+        ra = _timed(m, part, cfg, a, repeat)
+        rb = _timed(m, part, cfg, b, repeat)
+        rows.append([label, f"{ra.seconds:.3f}", f"{rb.seconds:.3f}", f"{rb.seconds / max(ra.seconds, 1e-9):.1f}x"])
+    ra = _timed(u1, rigid, rcfg, d, repeat)
+    rb = _timed(u1, rigid, rcfg, d.replace(skip_sticking=False), repeat)
+    rows.append(["sticking provably impossible (rigid, RigidU1): skipped vs checked", f"{ra.seconds:.3f}",
+                 f"{rb.seconds:.3f}", f"{rb.seconds / max(ra.seconds, 1e-9):.1f}x"])
+    from ppod_ros.physics import FieldCache
+
+    cache = FieldCache()
+    first = solve_field(sink, part, cfg, d, cache=cache)
+    second = solve_field(sink, part, cfg, d, cache=cache)
+    rows.append(["result cache (Sink): second call vs first", f"{second.seconds:.3f}", f"{first.seconds:.3f}",
+                 f"{first.seconds / max(second.seconds, 1e-9):.0f}x"])
+    ncl = PlateMotion.from_yaml(CONFIG / "motions" / "NearContactLoss.yaml")
+    full = _timed(ncl, part, cfg, d, repeat)
+    valid_only = _timed(ncl, part, cfg[full.valid], d, repeat)
+    rows.append([f"contact lost, not integrated (NearContactLoss, {int((~full.valid).sum())} invalid): "
+                 "valid only vs all", f"{valid_only.seconds:.3f}", f"{full.seconds:.3f}",
+                 f"{full.seconds / max(valid_only.seconds, 1e-9):.2f}x"])
+    pt = _timed(sink, part, cfg, d, repeat).seconds / len(cfg)
+    rt = ra.seconds / len(rcfg)
+    rows.append(["point part (2 states, no rotation) vs rigid part, per configuration", f"{pt * 1e3:.3f} ms",
+                 f"{rt * 1e3:.3f} ms", f"{rt / pt:.0f}x"])
+    texts.append(_table("what skipping saves", ["case", "with skip", "without", "saving"], rows))
+
+    # --- full dynamics ---------------------------------------------------------------------------------
+    rows = []
+    sim_s = 2.0 if quick else 10.0
+    for label, parts, cfgs in (
+        ("10 point parts", [part] * 10, np.column_stack([np.linspace(-0.05, 0.05, 10), np.linspace(-0.03, 0.03, 10),
+                                                          np.zeros(10)])),
+        ("10 rigid parts", [rigid] * 10, np.column_stack([np.linspace(-0.05, 0.05, 10), np.linspace(-0.03, 0.03, 10),
+                                                           np.linspace(0, 3, 10)])),
+        ("5 point + 5 rigid", [part] * 5 + [rigid] * 5, np.column_stack([np.linspace(-0.05, 0.05, 10),
+                                                                         np.linspace(-0.03, 0.03, 10),
+                                                                         np.linspace(0, 3, 10)])),
+    ):
+        for mname in ("Sink", "RigidU1"):
+            m = PlateMotion.from_yaml(CONFIG / "motions" / f"{mname}.yaml")
+            sim = PartDynamics(parts, cfgs)
+            tb = time.perf_counter()
+            for k in range(int(round(sim_s / 0.1))):
+                sim.advance(m, k * 0.1, 0.1)
+            el = time.perf_counter() - tb
+            rows.append([label, mname, f"{sim_s:.0f} s", f"{el:.2f} s", f"{sim_s / el:.0f}x",
+                         int(sim.state.contact_lost.sum())])
+    texts.append(_table("full dynamics, advanced in 0.1 s chunks",
+                        ["parts", "motion", "simulated", "wall", "x real time", "contact lost"], rows))
+
+    (out / "solver_tables.txt").write_text("\n".join(texts) + "\n", encoding="utf-8")
+    _plot(out / "solver_pareto.png", results, settings, motions, rigid_results, base_points)
+    print(f"\ntables: {out / 'solver_tables.txt'}; plot: {out / 'solver_pareto.png'}")
+    return 0
+
+
+def _plot(path, results, settings, motions, rigid_results, base_points) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    for label in settings:
+        t = [results[(label, n)][0] for n in motions]
+        e = [max(results[(label, n)][1], 1e-12) for n in motions]
+        ax.scatter(t, e, s=18, label=label)
+    for label, (t, ev, ew) in rigid_results.items():
+        ax.scatter([t], [max(ev, 1e-12)], marker="s", s=30, edgecolor="k", facecolor="none")
+        ax.annotate(f"rigid: {label}", (t, max(ev, 1e-12)), fontsize=6)
+    for t, e in base_points:
+        ax.scatter([t], [max(e, 1e-12)], marker="x", color="red", s=30)
+    ax.scatter([], [], marker="x", color="red", label="solve_ivp baseline (s per configuration)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.axhline(1e-5, color="grey", lw=0.6, ls="--")
+    ax.axvline(0.2, color="grey", lw=0.6, ls="--")
+    ax.set_xlabel("seconds (point: one 51 x 51 motion grid; rigid: 343 configurations)")
+    ax.set_ylabel("max error vs reference (m/s)")
+    ax.set_title("asymptotic solver: error vs time per motion and settings", fontsize=9)
+    ax.legend(fontsize=6, loc="lower left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

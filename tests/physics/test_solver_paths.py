@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from physics_suite import suite_motion
+from tests.physics.physics_suite import suite_motion
 from scipy.integrate import solve_ivp
 
 from ppod_ros.motion import point_kinematics

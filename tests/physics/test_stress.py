@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from physics_suite import suite_motion
+from tests.physics.physics_suite import suite_motion
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion, point_kinematics

@@ -95,6 +95,7 @@ class SimDeviceNode(Node):
         self._truth_period = p["truth_period_s"]
         self._next_clock = 0.0
         self._next_truth = 0.0
+        self._device_state = None
         self.world.process.on_step.append(self._on_step)
         self.world.on_cycle.append(self._on_cycle)
         self.world.on_frame.append(self._on_frame)
@@ -111,6 +112,15 @@ class SimDeviceNode(Node):
     # ------------------------------------------------------------------ publishing
     def _on_step(self, device) -> None:
         t = device.time_s
+        if device.state != self._device_state:
+            # The firmware's state changes (enable, watchdog, e-stop, fault) are what an operator
+            # looks for first after an incident: log them with the heartbeat age in device time.
+            last = device.last_heartbeat_s
+            self.get_logger().info(
+                f"device state {self._device_state.name + " -> " if self._device_state is not None else ""}"
+                f"{device.state.name} at t={t:.4f} s (last heartbeat at "
+                f"{'never' if last is None else f't={last:.4f} s'}; faults 0x{int(device.faults):x})")
+            self._device_state = device.state
         if t >= self._next_clock:
             self._next_clock = t + self._clock_period
             self._clock_pub.publish(Clock(clock=seconds_to_stamp(t)))

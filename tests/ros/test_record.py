@@ -20,13 +20,13 @@ def test_record_writes_a_readable_mcap_of_a_running_talker(tmp_path):
     out = tmp_path / "session.mcap"
     try:
         stack.wait_for("all nodes up", 60)
-        rec = ppod("record", str(out), "--duration", "4")
+        rec = ppod("record", str(out), "--duration", "6")  # 120 messages; discovery may take seconds under load
         assert rec.wait(60) == 0, rec.output
     finally:
         stack.p.send_signal(2)
         stack.wait(30)
     msgs = [m for m in read_mcap(out) if m.topic == "/ppod/test_talk"]
-    assert len(msgs) >= 20
+    assert len(msgs) >= 20, len(msgs)
     decoded = [m.decode() for m in msgs]
     counts = [int(d.harmonics[0].amplitude[0]) for d in decoded]
     assert counts == sorted(counts) and len(set(counts)) == len(counts)

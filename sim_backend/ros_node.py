@@ -116,8 +116,9 @@ class SimDeviceNode(Node):
             # The firmware's state changes (enable, watchdog, e-stop, fault) are what an operator
             # looks for first after an incident: log them with the heartbeat age in device time.
             last = device.last_heartbeat_s
+            before = "" if self._device_state is None else f"{self._device_state.name} -> "
             self.get_logger().info(
-                f"device state {self._device_state.name + " -> " if self._device_state is not None else ""}"
+                f"device state {before}"
                 f"{device.state.name} at t={t:.4f} s (last heartbeat at "
                 f"{'never' if last is None else f't={last:.4f} s'}; faults 0x{int(device.faults):x})")
             self._device_state = device.state

@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
-from tests.physics.physics_suite import suite_motion
 from scipy.integrate import solve_ivp
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.physics import PartDynamics, SolverSettings, solve_field
+from tests.physics.physics_suite import suite_motion
 
 
 def _run(sim, motion, t0, duration, chunk):

@@ -5,12 +5,12 @@ import math
 
 import numpy as np
 import pytest
-from tests.physics.physics_suite import suite_motion
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart
 from ppod_ros.physics import PRESETS, FieldCache, SolverSettings, grid_configs, preset, solve_field
+from tests.physics.physics_suite import suite_motion
 
 
 def test_results_have_the_documented_shapes_and_are_read_only(point_part, rigid_part, line_sink_x):

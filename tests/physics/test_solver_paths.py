@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
-from tests.physics.physics_suite import suite_motion
 from scipy.integrate import solve_ivp
 
 from ppod_ros.motion import point_kinematics
 from ppod_ros.parts import PointPart
 from ppod_ros.physics import INTEGRATORS, SolverSettings, grid_configs, limit_cycle, solve_field
+from tests.physics.physics_suite import suite_motion
 
 TIGHT = dict(rtol=1e-9, fixed_point_rtol=1e-7, cache=False)
 

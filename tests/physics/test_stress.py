@@ -4,12 +4,12 @@ import math
 
 import numpy as np
 import pytest
-from tests.physics.physics_suite import suite_motion
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion, point_kinematics
 from ppod_ros.parts import PointPart, RigidPart, published_rigid_part
 from ppod_ros.physics import SolverSettings, grid_configs, solve_field
+from tests.physics.physics_suite import suite_motion
 
 CFG = [[0.03, 0.01], [-0.02, 0.04], [0.0, 0.0]]
 

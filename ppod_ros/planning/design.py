@@ -236,8 +236,14 @@ def design_field(spec: FieldSpec, part: PointPart | RigidPart | None = None, *, 
     table0[0] = initial_phasors(spec, freq)
     x0, ref = _pack(table0)
 
+    coil_map = _coil_map(device, freq, harmonics)
+    rms_limit = 0.9 * _RMS_PER_TEMPERATURE * lim.coil_temperature_c
+
     def residual(v: np.ndarray) -> np.ndarray:
-        m = _motion(_unpack(v, harmonics, ref), freq, name)
+        table = _unpack(v, harmonics, ref)
+        m = _motion(table, freq, name)
+        currents = np.einsum("hcj,hj->hc", coil_map, table)  # (H, 6 coils) complex amperes
+        rms = np.sqrt(np.sum(np.abs(currents) ** 2, axis=0) / 2.0)
         r = solve_field(m, point, fit_pts, settings)
         vel = np.where(r.valid[:, None], np.nan_to_num(r.velocity[:, :2]), 0.0)
         res = (vel - target) / v_scale
@@ -246,7 +252,9 @@ def design_field(spec: FieldSpec, part: PointPart | RigidPart | None = None, *, 
         margin = contact_margin(m, lim.working_radius_m)
         pen = [max(0.0, acc - 0.95 * lim.plate_accel_mps2), max(0.0, (ang - 0.95 * lim.plate_angular_accel_radps2)
                                                                / 10.0),
-               max(0.0, 1.5 * lim.contact_margin_mps2 - margin)]
+               max(0.0, 1.5 * lim.contact_margin_mps2 - margin),
+               max(0.0, float(rms.max()) - rms_limit),
+               max(0.0, float(np.abs(currents).sum(axis=0).max()) - 0.9 * lim.coil_current_a)]
         return np.concatenate([res.reshape(-1), 10.0 * np.array(pen)])
 
     sol = least_squares(residual, x0, method="trf", x_scale=1.0, diff_step=1e-3, max_nfev=max_evaluations,
@@ -255,6 +263,29 @@ def design_field(spec: FieldSpec, part: PointPart | RigidPart | None = None, *, 
     result.seconds = time.perf_counter() - t0
     _CACHE[key] = result
     return result
+
+
+#: The thermal limit as an rms current: device.yaml's 110 degC is "about 3 A rms" (docs/device.md);
+#: a proxy for the optimiser only: GoalPlanner.plan has the last word.
+_RMS_PER_TEMPERATURE = 3.0 / 110.0
+
+
+def _coil_map(device, frequency_hz: float, harmonics: int) -> np.ndarray:
+    """(H, 6 coils, 6 axes) complex: the nominal plant's feed-forward currents per unit axis phasor
+    (linear in the motion), so the optimiser can keep currents in bounds without planning."""
+    from ppod_ros.actuation.planning import GoalPlanner
+
+    planner = GoalPlanner(device)
+    out = np.zeros((harmonics, 6, 6), dtype=complex)
+    for h in range(1, harmonics + 1):
+        for j in range(6):
+            X = np.zeros((h, 6), dtype=complex)
+            X[h - 1, j] = _SCALE[j] * 0.01
+            m = PlateMotion.from_phasors(frequency_hz, np.arange(1, h + 1), X)
+            kt = max(h, 1)
+            out[h - 1, :, j] = planner.plant.feedforward(m, max(kt, device.limits.max_harmonic))[h - 1] \
+                / (_SCALE[j] * 0.01)
+    return out
 
 
 def _within_limits(motion: PlateMotion, spec: FieldSpec, point: PointPart, device, messages: list[str]

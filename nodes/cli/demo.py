@@ -1,0 +1,293 @@
+"""The full demo: the stack against the simulated device moves a chosen part to a goal pose.
+
+Starts every node (`ppod up --sim`: simulated device with parts scattered on the plate, waveform
+generator, accelerometer feedback, part tracker on the simulated camera, field planner), waits until
+the tracker sees every part, then asks the field_planner (MovePart action) to bring the chosen part
+to the goal pose from camera feedback while the other parts are gathered in a sink. It prints the
+planner's progress, then what it reached, measured against the simulator's ground truth: position
+and orientation error of the chosen part, the tracker's error, where the other parts ended, the
+plate's acceleration-tracking error, and how the device clock kept up with real time. It writes
+(under --out) a picture of the trajectories over the field, an animation, the session as MCAP
+(`ppod replay OUT/session.mcap --against-sim` replays it) and every node's log.
+
+examples:
+  ppod demo                                    the default scene, the bracket to (0.02, -0.02) at 0 deg
+  ppod demo --part washer --goal 0.03 0.03     a point part (position only)
+  ppod demo --goal 0 -0.03 90 --collect -0.03 0.04 --out out/demo2
+  ppod demo --no-collect --verbose             forward every node's log lines
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ppod_ros.errors import ConfigError, DeviceError
+
+HELP = "the full demo: the stack against the simulated device brings a part to a goal pose"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scene", type=Path, help="scene YAML for the simulated device (default: the packaged one)")
+    parser.add_argument("--part", default="bracket",
+                        help="the part to move: a scene label (first match) or index (default: bracket)")
+    parser.add_argument("--goal", nargs="+", type=float, default=[0.02, -0.02, 0.0], metavar="V",
+                        help="goal X Y [THETA_DEG] in the plate frame (m, m, deg; default 0.02 -0.02 0); "
+                             "no THETA: position only")
+    parser.add_argument("--collect", nargs=2, type=float, default=[-0.03, 0.03], metavar=("X", "Y"),
+                        help="where the other parts are gathered (m; default -0.03 0.03)")
+    parser.add_argument("--no-collect", action="store_true", help="leave the other parts alone")
+    parser.add_argument("--timeout", type=float, default=90.0, help="MovePart timeout, device-clock s (default 90)")
+    parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
+    parser.add_argument("--no-animation", action="store_true", help="skip the GIF (saves a few seconds)")
+    parser.add_argument("--no-record", action="store_true", help="do not record the session to MCAP")
+    parser.add_argument("--verbose", action="store_true", help="forward every node's log lines")
+
+
+def _say(text: str) -> None:
+    print(f"[demo] {text}", flush=True)
+
+
+def _choose(scene, which: str) -> int:
+    if which.isdigit():
+        i = int(which)
+        if not 0 <= i < len(scene.parts):
+            raise ConfigError(f"--part: index {i} outside 0..{len(scene.parts) - 1}")
+        return i
+    for i, p in enumerate(scene.parts):
+        if p.label == which:
+            return i
+    raise ConfigError(f"--part: no part labelled {which!r} in the scene ({', '.join(p.label for p in scene.parts)})")
+
+
+def _goal(values: list[float], rigid: bool) -> tuple[float, float, float | None]:
+    if len(values) not in (2, 3):
+        raise ConfigError(f"--goal: expected X Y [THETA_DEG], got {len(values)} values")
+    if not all(math.isfinite(v) for v in values):
+        raise ConfigError(f"--goal: values must be finite, got {values}")
+    if math.hypot(values[0], values[1]) > 0.07:
+        raise ConfigError(f"--goal: ({values[0]}, {values[1]}) is outside the working disc (radius 0.07 m)")
+    theta = math.radians(values[2]) if len(values) == 3 and rigid else None
+    return values[0], values[1], theta
+
+
+def run(args: argparse.Namespace) -> int:
+    from ppod_sim.ros_node import default_scene_path
+    from ppod_sim.scene import load_scene
+
+    scene_path = args.scene or default_scene_path()
+    scene = load_scene(scene_path)
+    chosen = _choose(scene, args.part)
+    rigid = scene.parts[chosen].part.kind == "rigid"
+    goal = _goal(args.goal, rigid)
+    collect = None if args.no_collect else (float(args.collect[0]), float(args.collect[1]))
+    args.out.mkdir(parents=True, exist_ok=True)
+    return _Demo(args, scene, scene_path, chosen, goal, collect).run()
+
+
+class _Demo:
+    def __init__(self, args, scene, scene_path, chosen, goal, collect):
+        self.args, self.scene, self.scene_path = args, scene, scene_path
+        self.chosen, self.goal, self.collect = chosen, goal, collect
+        self.result = None
+        self.reached: dict[str, float] = {}
+
+    def run(self) -> int:
+        from ppod_nodes.launch.spec import load_launch_spec
+        from ppod_nodes.launch.stack import Stack
+
+        args = self.args
+        log_path = args.out / "stack.log"
+        _say(f"scene {self.scene_path}: {len(self.scene.parts)} parts "
+             f"({', '.join(p.label for p in self.scene.parts)}); moving #{self.chosen} "
+             f"({self.scene.parts[self.chosen].label}) to ({self.goal[0]:.3f}, {self.goal[1]:.3f} m"
+             + (f", {math.degrees(self.goal[2]):.0f} deg)" if self.goal[2] is not None else ")")
+             + (f", the others to ({self.collect[0]:.3f}, {self.collect[1]:.3f} m)" if self.collect else ""))
+        _say(f"node logs: {log_path}" + (" (also shown here)" if args.verbose else ""))
+        wall0 = time.monotonic()
+        with open(log_path, "w", encoding="utf-8") as log:
+            out = _Tee(log, sys.stdout) if args.verbose else log
+            extra = {"sim_device": {"scene": str(self.scene_path)}}
+            with Stack(load_launch_spec(), sim=True, out=out, extra_params=extra) as stack:
+                stack.start()
+                _say(f"stack up in {time.monotonic() - wall0:.1f} s: "
+                     + ", ".join(n.name for n in stack.nodes))
+                code = self._drive(stack)
+        _say(f"stack stopped; wall time {time.monotonic() - wall0:.1f} s")
+        self._figures()
+        return code
+
+    # ------------------------------------------------------------------ the run
+    def _drive(self, stack) -> int:
+        from ppod_nodes.common.session import RosSession
+        from ppod_nodes.demo.log import DemoLog
+
+        self.log = DemoLog()
+        with RosSession("ppod_demo") as ros:
+            self.log.attach(ros.node)
+            recorder = None
+            if not self.args.no_record:
+                from ppod_nodes.cli.record import default_include
+                from ppod_nodes.record.mcap_io import McapRecorder
+
+                meta = {"ppod": {"recorded_by": "ppod demo", "started_unix_s": f"{time.time():.3f}"}}
+                recorder = McapRecorder(ros.node, self.args.out / "session.mcap", default_include(False), meta)
+            try:
+                track_id = self._wait_for_tracks(ros)
+                code = self._move(ros, track_id, stack)
+            finally:
+                if recorder is not None:
+                    recorder.close()
+                    _say(f"recorded {sum(recorder.counts.values())} messages to {self.args.out / 'session.mcap'}")
+        return code
+
+    def _wait_for_tracks(self, ros) -> int:
+        n = len(self.scene.parts)
+        _say(f"waiting for the tracker to see all {n} parts")
+        def all_seen() -> bool:
+            tracked = self.log.latest_tracked()
+            return tracked is not None and len(tracked[1]) >= n and self.log.latest_truth() is not None
+
+        if not ros.wait_until(all_seen, 60):
+            seen = len((self.log.latest_tracked() or (0, {}))[1])
+            raise DeviceError(f"the tracker sees {seen} of {n} parts after 60 s (see {self.args.out / 'stack.log'})")
+        t, truth = self.log.latest_truth()
+        _, tracked = self.log.latest_tracked()
+        target = truth[self.chosen, :2]
+        track_id, (x, y, _) = min(tracked.items(),
+                                  key=lambda kv: math.hypot(kv[1][0] - target[0], kv[1][1] - target[1]))
+        _say(f"tracking {len(tracked)} parts; #{self.chosen} is track {track_id}, "
+             f"{1e3 * math.hypot(x - target[0], y - target[1]):.2f} mm from its true position")
+        self.t_start = t
+        return track_id
+
+    def _move(self, ros, track_id: int, stack) -> int:
+        from ppod_msgs.action import MovePart
+        from rclpy.action import ActionClient
+
+        from ppod_nodes.common import topics
+
+        client = ActionClient(ros.node, MovePart, "/" + topics.MOVE_PART)
+        if not client.wait_for_server(timeout_sec=30):
+            raise DeviceError("the field_planner's MovePart action is not available")
+        goal = MovePart.Goal(part_id=track_id, use_orientation=self.goal[2] is not None,
+                             timeout_s=float(self.args.timeout), collect_others=self.collect is not None)
+        goal.target.x, goal.target.y = self.goal[0], self.goal[1]
+        goal.target.theta = float(self.goal[2] or 0.0)
+        if self.collect is not None:
+            goal.collect_x_m, goal.collect_y_m = self.collect
+        last_print = [-math.inf]
+
+        def on_feedback(msg) -> None:
+            fb = msg.feedback
+            t = (self.log.latest_truth() or (self.t_start, None))[0]
+            self.log.add_feedback(t, fb.phase, fb.text, fb.position_error_m)
+            if t - last_print[0] >= 2.0:
+                last_print[0] = t
+                _say(f"t = {t - self.t_start:5.1f} s  {fb.phase:<11} {fb.text}")
+
+        wall0 = time.monotonic()
+        sent = client.send_goal_async(goal, feedback_callback=on_feedback)
+        handle = ros.wait_future(sent, 30, "MovePart goal")
+        if not handle.accepted:
+            raise DeviceError("the field_planner rejected the MovePart goal (see the log)")
+        _say("MovePart accepted by the field_planner")
+        done = threading.Event()
+        result_future = handle.get_result_async()
+        result_future.add_done_callback(lambda _f: done.set())
+        while not done.wait(0.5):
+            if not stack.alive():
+                raise DeviceError("a node of the stack died (see the log)")
+            if time.monotonic() - wall0 > 3 * self.args.timeout + 60:
+                handle.cancel_goal_async()
+                raise DeviceError("MovePart did not finish (wall-clock guard)")
+        wall = time.monotonic() - wall0
+        res = result_future.result().result
+        t_end, truth = self.log.latest_truth()
+        self._report(res, truth, t_end, wall)
+        return 0 if res.success else 1
+
+    def _report(self, res, truth: np.ndarray, t_end: float, wall_s: float) -> None:
+        device_s = t_end - self.t_start
+        pose = truth[self.chosen]
+        err_mm = 1e3 * math.hypot(pose[0] - self.goal[0], pose[1] - self.goal[1])
+        r = self.reached
+        r.update(device_s=device_s, wall_s=wall_s, real_time_factor=device_s / max(wall_s, 1e-9),
+                 true_position_error_mm=err_mm, reported_position_error_mm=1e3 * res.position_error_m)
+        _say(("done: " if res.success else "not reached: ") + res.reason)
+        _say(f"part #{self.chosen} ({self.scene.parts[self.chosen].label}) at ({pose[0]:.4f}, {pose[1]:.4f}) m: "
+             f"{err_mm:.2f} mm from the goal (ground truth), {1e3 * res.position_error_m:.2f} mm by the tracker")
+        if self.goal[2] is not None:
+            sym = self.scene.parts[self.chosen].part.footprint
+            period = sym.symmetry_rad if sym is not None and sym.symmetry_rad > 0 else 2 * math.pi
+            d = (pose[2] - self.goal[2] + period / 2) % period - period / 2
+            r["true_angle_error_deg"] = abs(math.degrees(d))
+            _say(f"orientation {math.degrees(pose[2]):.2f} deg: {abs(math.degrees(d)):.2f} deg from the goal "
+                 f"(ground truth), {math.degrees(res.orientation_error_rad):.2f} deg by the tracker")
+        if self.collect is not None and len(truth) > 1:
+            others = [i for i in range(len(truth)) if i != self.chosen]
+            dist = [1e3 * math.hypot(truth[i, 0] - self.collect[0], truth[i, 1] - self.collect[1]) for i in others]
+            r["others_max_mm"] = max(dist)
+            _say(f"other parts: {np.mean(dist):.1f} mm mean, {max(dist):.1f} mm max from the collect point")
+        acc = [e for t, e, _ in self.log.accel_errors if t > 0]
+        if acc:
+            r["accel_error_last"] = acc[-1]
+            _say(f"plate acceleration tracking error (accel_feedback): last {100 * acc[-1]:.2f} %, "
+                 f"median {100 * float(np.median(acc)):.2f} % over {len(acc)} estimates")
+        _say(f"{device_s:.1f} s of device time in {wall_s:.1f} s wall: {r['real_time_factor']:.2f}x real time")
+
+    # ------------------------------------------------------------------ pictures
+    def _figures(self) -> None:
+        from ppod_nodes.demo.figures import FieldCache, write_animation, write_picture
+
+        t, poses = self.log.trajectories()
+        if len(t) < 2:
+            _say("no trajectories recorded: no figures")
+            return
+        keep = t >= self.t_start - 1.0
+        t, poses = t[keep], poses[keep]
+        parts = [p.part for p in self.scene.parts]
+        cache = FieldCache()
+        final_motion = next((m for _, m in reversed(self.log.motions) if m is not None), None)
+        title = (f"ppod demo: {self.scene.parts[self.chosen].label} to goal"
+                 + (f" ({self.reached['true_position_error_mm']:.2f} mm" if "true_position_error_mm" in self.reached
+                    else " (")
+                 + (f", {self.reached['true_angle_error_deg']:.2f} deg)" if "true_angle_error_deg" in self.reached
+                    else ")")
+                 + (f"\nfield of the last motion '{final_motion.name}'" if final_motion else ""))
+        png = self.args.out / "demo.png"
+        write_picture(png, t, poses, parts, self.chosen, self.goal, self.collect, final_motion, cache, title)
+        _say(f"picture: {png}")
+        if not self.args.no_animation:
+            phases = self.log.feedback
+
+            def phase_at(tf: float) -> str:
+                before = [p for tt, p, _, _ in phases if tt <= tf]
+                return before[-1] if before else ""
+
+            gif = self.args.out / "demo.gif"
+            n = write_animation(gif, t, poses, parts, self.chosen, self.goal, self.collect, self.log.motion_at,
+                                cache, phase_at=phase_at)
+            _say(f"animation: {gif} ({n} frames)")
+
+
+class _Tee:
+    """Write to a log file and a console stream."""
+
+    def __init__(self, *streams):
+        self.streams = streams
+
+    def write(self, text: str) -> int:
+        for s in self.streams:
+            s.write(text)
+        return len(text)
+
+    def flush(self) -> None:
+        for s in self.streams:
+            s.flush()

@@ -1,0 +1,298 @@
+"""field_planner: designs plate motions for requested velocity fields and moves parts with them.
+
+Lifecycle node (STYLE.md rule 9); the logic is ppod_ros.planning (docs/planner.md):
+  configure  load the device description (the limits every design must respect) and the part
+             models by label (the tracker file: a ``part`` mapping, or a point part with the
+             default friction and the listed footprint)
+  activate   accept PlanField requests and MovePart goals; follow the tracked part poses
+  deactivate abort a running MovePart goal and ask the generator to ramp the plate down
+  cleanup    drop the models
+
+Interfaces (names in ppod_nodes.common.topics):
+  ppod/plan_field  (ppod_msgs/PlanField)   design a motion for a field; ``apply`` publishes it
+  ppod/move_part   (ppod_msgs/MovePart)    closed loop: bring part ``part_id`` to a pose, choosing
+                                           and updating fields from the tracked poses (a Task)
+  ppod/part_poses  (in)                    the tracker's poses; the Task steps on each array
+  ppod/plate_motion_goal (out)             the motions it designs, for the waveform generator
+  ppod/stop        (client)                ramp the plate down when a task ends or is cancelled
+
+One MovePart goal runs at a time (a field moves every part on the plate); a new goal is rejected
+while one runs. The Task steps in the pose subscription's callback; the action's execute
+coroutine only waits for its outcome, so the single-threaded executor never blocks on it.
+Diagnostics: the last design (kind, R^2, seconds) and the running task (phase, errors).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from ppod_msgs.action import MovePart
+from ppod_msgs.msg import PartPose, PartPoseArray
+from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+from ppod_msgs.srv import PlanField
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.task import Future
+from std_srvs.srv import Trigger
+
+from ppod_nodes.common import diagnostics as diag
+from ppod_nodes.common import qos, topics
+from ppod_nodes.common.convert import motion_to_msg, stamp_to_seconds
+from ppod_nodes.common.lifecycle import PpodLifecycleNode
+from ppod_nodes.common.params import Param
+from ppod_nodes.common.runner import make_main
+from ppod_ros.config.fields import Fields, load_yaml_file
+from ppod_ros.device import load_device_config
+from ppod_ros.errors import ConfigError, PpodError
+from ppod_ros.parts import Footprint, PointPart, part_from_dict, part_from_yaml_text
+from ppod_ros.planning import FieldSpec, Task, design_field
+
+
+def part_models_from_tracker_file(path: str | Path, default_mu: float) -> dict[str, Any]:
+    """Label -> part model from a tracker file (docs/vision.md): its ``part`` mapping when given,
+    otherwise a point part with ``default_mu`` and the listed footprint."""
+    data = load_yaml_file(path, "tracker")
+    if not isinstance(data, dict) or not isinstance(data.get("parts"), list):
+        raise ConfigError(f"{path}: parts: expected a list of part types")
+    models: dict[str, Any] = {}
+    for i, item in enumerate(data["parts"]):
+        f = Fields(item, f"{path}: parts[{i}]")
+        label = f.string("label")
+        if item.get("part") is not None:
+            models[label] = part_from_dict(item["part"], f.key_path("part"))
+        else:
+            models[label] = PointPart(mu=default_mu,
+                                      footprint=Footprint.from_value(item.get("footprint"), f.key_path("footprint")))
+    return models
+
+
+class _RunningTask:
+    """The MovePart goal being executed: its handle, the Task, the track ids in Task order."""
+
+    def __init__(self, handle, task: Task, ids: list[int], goal, started_s: float):
+        self.handle = handle
+        self.task = task
+        self.ids = ids
+        self.goal = goal
+        self.started_s = started_s
+        self.done: Future = Future()
+        self.last_motion_key = None
+        self.last_step = None
+
+
+class FieldPlannerNode(PpodLifecycleNode):
+    PARAMS = (
+        Param("device_config", "", "device description YAML; empty: the packaged default (docs/device.md)"),
+        Param("tracker_config", "", "tracker file naming the part types (label -> part model); "
+                                    "empty: the packaged default"),
+        Param("default_mu", 0.3, "friction of parts whose model is not given", min_value=0.01, max_value=2.0),
+        Param("frequency_hz", 0.0, "design frequency (Hz); 0: the planner's default", min_value=0.0),
+        Param("num_frequencies", 1, "1 (11 inputs) or 2 (23 inputs)", min_value=1, max_value=2),
+        Param("position_tolerance_m", 1e-3, "default MovePart position tolerance (m)", min_value=1e-5),
+        Param("orientation_tolerance_deg", 2.0, "default MovePart orientation tolerance (deg)", min_value=0.01),
+        Param("timeout_s", 60.0, "default MovePart timeout (device-clock s)", min_value=1.0),
+        Param("stop_when_done", True, "ramp the plate down when a MovePart goal ends (parts stay put)"),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__("field_planner", **kwargs)
+        self.device = None
+        self.models: dict[str, Any] = {}
+        self.running: _RunningTask | None = None
+        self._poses: PartPoseArray | None = None
+        self.goal_pub = self.create_lifecycle_publisher(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+        self.create_service(PlanField, topics.PLAN_FIELD, self._on_plan_field)
+        self.create_subscription(PartPoseArray, topics.PART_POSES, self._on_poses, qos.STREAM)
+        self._stop_client = self.create_client(Trigger, topics.STOP)
+        self._action = ActionServer(self, MovePart, topics.MOVE_PART, execute_callback=self._execute,
+                                    goal_callback=self._on_goal_request, cancel_callback=self._on_cancel)
+
+    # ------------------------------------------------------------------ lifecycle
+    def on_configure_node(self, params):
+        self.device = load_device_config(params["device_config"] or None)
+        tracker = params["tracker_config"] or str(resources.files("ppod_ros") / "data" / "tracker.yaml")
+        self.models = part_models_from_tracker_file(tracker, params["default_mu"])
+        self.get_logger().info(f"part models: {', '.join(f'{k} ({v.kind})' for k, v in self.models.items())}")
+
+    def on_deactivate_node(self):
+        if self.running is not None:
+            self._finish(False, "the planner was deactivated")
+
+    def on_cleanup_node(self):
+        self.device, self.models = None, {}
+
+    def on_shutdown_node(self):
+        if self.running is not None:
+            self._finish(False, "the planner shut down")
+
+    # ------------------------------------------------------------------ PlanField
+    def _frequency(self, requested: float) -> float | None:
+        f = requested or self.params.get("frequency_hz", 0.0)
+        return float(f) if f > 0 else None
+
+    def _on_plan_field(self, req: PlanField.Request, resp: PlanField.Response) -> PlanField.Response:
+        if self.lifecycle_state != "active":
+            resp.success, resp.reason = False, f"field_planner is {self.lifecycle_state}, not active"
+            return resp
+        try:
+            spec = FieldSpec.from_request(req.field_type, list(req.params))
+            part = part_from_yaml_text(req.part_yaml, "part_yaml") if req.part_yaml.strip() else None
+            harmonics = int(req.num_frequencies) or self.params["num_frequencies"]
+            result = design_field(spec, part, frequency_hz=self._frequency(req.frequency_hz),
+                                  harmonics=harmonics, device=self.device)
+        except PpodError as exc:
+            resp.success, resp.reason = False, str(exc)
+            self.get_logger().warning(f"PlanField {req.field_type} {list(req.params)} rejected: {exc}")
+            return resp
+        resp.success, resp.reason = True, "; ".join(result.messages)
+        resp.motion = motion_to_msg(result.motion, self.get_clock().now().to_msg())
+        resp.r_squared, resp.rms_error_mps = float(result.r2), float(result.rms_error_mps)
+        resp.valid_fraction, resp.seconds = float(result.valid_fraction), float(result.seconds)
+        self.get_logger().info(f"designed '{result.motion.name}': R^2 {result.r2:.4f}, rms "
+                               f"{1e3 * result.rms_error_mps:.2f} mm/s, {result.seconds:.2f} s"
+                               + (" (cached)" if result.cached else ""))
+        self.diagnostics.set("design", diag.OK if result.r2 >= 0.98 else diag.WARN,
+                             f"{req.field_type}: R^2 {result.r2:.4f}", r_squared=result.r2, seconds=result.seconds)
+        if req.apply:
+            if self.running is not None:
+                resp.reason += "; not applied: a MovePart goal is running"
+            else:
+                self.goal_pub.publish(resp.motion)
+        return resp
+
+    # ------------------------------------------------------------------ MovePart
+    def _on_goal_request(self, goal: MovePart.Goal) -> GoalResponse:
+        if self.lifecycle_state != "active":
+            self.get_logger().warning("MovePart rejected: the planner is not active")
+            return GoalResponse.REJECT
+        if self.running is not None:
+            self.get_logger().warning("MovePart rejected: another goal is running (a field moves every part)")
+            return GoalResponse.REJECT
+        if self._poses is None or not any(p.id == goal.part_id for p in self._poses.parts):
+            self.get_logger().warning(f"MovePart rejected: part {goal.part_id} is not tracked")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _on_cancel(self, _handle) -> CancelResponse:
+        return CancelResponse.ACCEPT
+
+    def _build_task(self, goal: MovePart.Goal) -> tuple[Task, list[int]]:
+        parts, ids = [], []
+        for p in self._poses.parts:
+            model = self.models.get(p.label)
+            if model is None:
+                model = PointPart(mu=self.params["default_mu"])
+                self.get_logger().warning(f"no model for label {p.label!r}: treated as a point part")
+            parts.append(model)
+            ids.append(int(p.id))
+        p = self.params
+        theta = float(goal.target.theta) if goal.use_orientation else None
+        collect = (float(goal.collect_x_m), float(goal.collect_y_m)) if goal.collect_others else None
+        task = Task(parts, ids.index(int(goal.part_id)), (float(goal.target.x), float(goal.target.y), theta),
+                    collect, device=self.device,
+                    position_tol_m=goal.position_tolerance_m or p["position_tolerance_m"],
+                    angle_tol_rad=goal.orientation_tolerance_rad or math.radians(p["orientation_tolerance_deg"]),
+                    timeout_s=goal.timeout_s or p["timeout_s"])
+        return task, ids
+
+    async def _execute(self, handle) -> MovePart.Result:
+        goal: MovePart.Goal = handle.request
+        result = MovePart.Result()
+        try:
+            task, ids = self._build_task(goal)
+        except PpodError as exc:
+            handle.abort()
+            result.success, result.reason = False, str(exc)
+            self.get_logger().error(f"MovePart: {exc}")
+            return result
+        self.running = _RunningTask(handle, task, ids, goal, self._now())
+        self.get_logger().info(f"MovePart: part {goal.part_id} to ({goal.target.x:.4f}, {goal.target.y:.4f}"
+                               + (f", {math.degrees(goal.target.theta):.1f} deg)" if goal.use_orientation else ")")
+                               + (f", others to ({goal.collect_x_m:.3f}, {goal.collect_y_m:.3f})"
+                                  if goal.collect_others else ""))
+        running = self.running
+        success, reason = await running.done
+        step = running.last_step
+        result.success, result.reason = bool(success), reason
+        result.elapsed_s = self._now() - running.started_s
+        pose = self._pose_of(goal.part_id)
+        if pose is not None:
+            result.final_pose = pose.pose
+        if step is not None:
+            result.position_error_m = float(step.position_error_m)
+            result.orientation_error_rad = float(step.angle_error_rad or 0.0)
+        if handle.is_cancel_requested:
+            handle.canceled()
+        elif success:
+            handle.succeed()
+        else:
+            handle.abort()
+        self.get_logger().info(f"MovePart {'succeeded' if success else 'ended'}: {reason}")
+        return result
+
+    def _pose_of(self, part_id: int) -> PartPose | None:
+        if self._poses is None:
+            return None
+        return next((p for p in self._poses.parts if p.id == part_id), None)
+
+    def _on_poses(self, msg: PartPoseArray) -> None:
+        self._poses = msg
+        run = self.running
+        if run is None:
+            return
+        if run.handle.is_cancel_requested:
+            self._finish(False, "cancelled")
+            return
+        by_id = {int(p.id): p for p in msg.parts if p.status != PartPose.STATUS_LOST}
+        poses = np.full((len(run.ids), 3), np.nan)
+        for row, pid in enumerate(run.ids):
+            p = by_id.get(pid)
+            if p is not None:
+                poses[row] = (p.pose.x, p.pose.y, p.pose.theta)
+        t0 = time.perf_counter()
+        try:
+            step = run.task.step(stamp_to_seconds(msg.header.stamp), poses)
+        except PpodError as exc:
+            self._finish(False, f"planning failed: {exc}")
+            return
+        run.last_step = step
+        if step.motion is not None and step.motion.key != run.last_motion_key:
+            run.last_motion_key = step.motion.key
+            self.goal_pub.publish(motion_to_msg(step.motion, self.get_clock().now().to_msg()))
+        fb = MovePart.Feedback(phase=step.phase, text=step.text, position_error_m=float(step.position_error_m),
+                               orientation_error_rad=float(step.angle_error_rad or 0.0))
+        pose = by_id.get(int(run.goal.part_id))
+        if pose is not None:
+            fb.current_pose = pose.pose
+        run.handle.publish_feedback(fb)
+        self.diagnostics.set("task", diag.OK, step.text, phase=step.phase,
+                             position_error_m=step.position_error_m, step_ms=1e3 * (time.perf_counter() - t0))
+        if step.done or step.failed_reason:
+            self._finish(step.done and not step.failed_reason, step.failed_reason or step.text)
+
+    def _finish(self, success: bool, reason: str) -> None:
+        run, self.running = self.running, None
+        if run is None:
+            return
+        if self.params.get("stop_when_done", True) or not success:
+            # Static friction holds the parts where they are once the plate is at rest.
+            if self._stop_client.service_is_ready():
+                self._stop_client.call_async(Trigger.Request())
+            else:
+                self.get_logger().warning("ppod/stop is not available: the last motion keeps playing")
+        self.diagnostics.set("task", diag.OK if success else diag.WARN, reason)
+        if not run.done.done():
+            run.done.set_result((success, reason))
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+
+main = make_main(FieldPlannerNode)
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,65 @@
+"""The demo's ROS-free pieces: argument checks, the picture and the animation."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ppod_nodes.cli.demo import _choose, _goal
+from ppod_nodes.demo.figures import FieldCache, write_animation, write_picture
+from ppod_ros.errors import ConfigError
+from ppod_ros.motion import PlateMotion
+from ppod_sim.ros_node import default_scene_path
+from ppod_sim.scene import load_scene
+
+LINESINKX = PlateMotion.from_yaml_text(
+    "name: LineSinkX\nfrequency_hz: 30\nharmonics:\n"
+    "  - {k: 1, amplitude: [10, 0, 0, 0, 100, 0], phase: [0, 0, 0, 0, 4.71238898, 0]}\n")
+
+
+def test_the_demo_finds_the_chosen_part_by_label_or_index_and_names_the_choices_otherwise():
+    scene = load_scene(default_scene_path())
+    assert scene.parts[_choose(scene, "bracket")].label == "bracket"
+    assert _choose(scene, "2") == 2
+    with pytest.raises(ConfigError, match="no part labelled 'gear'.*bracket"):
+        _choose(scene, "gear")
+    with pytest.raises(ConfigError, match="index 99"):
+        _choose(scene, "99")
+
+
+def test_demo_goals_are_checked_and_theta_is_kept_only_for_rigid_parts():
+    assert _goal([0.01, 0.02, 90.0], rigid=True) == (0.01, 0.02, pytest.approx(math.pi / 2))
+    assert _goal([0.01, 0.02, 90.0], rigid=False) == (0.01, 0.02, None)
+    with pytest.raises(ConfigError, match="outside the working disc"):
+        _goal([0.09, 0.0], rigid=False)
+    with pytest.raises(ConfigError, match="X Y"):
+        _goal([0.01], rigid=False)
+    with pytest.raises(ConfigError, match="finite"):
+        _goal([float("nan"), 0.0], rigid=False)
+
+
+def test_the_field_cache_computes_the_linesink_field_once_per_motion():
+    cache = FieldCache(n=9, half_m=0.06)
+    v = cache.field(LINESINKX)
+    assert v.shape == (9, 9, 2)
+    # LineSinkX pulls parts towards x = 0 (PHYSICS.md: v_x about -0.28 x).
+    assert np.nanmean(v[:, -1, 0]) < 0 < np.nanmean(v[:, 0, 0])
+    assert cache.field(LINESINKX) is v
+    assert cache.field(None) is None
+
+
+def test_the_picture_and_the_animation_are_written(tmp_path):
+    scene = load_scene(default_scene_path())
+    parts = [p.part for p in scene.parts]
+    t = np.linspace(0.0, 2.0, 21)
+    start = scene.poses
+    poses = start[None] * (1 - t[:, None, None] / 4)
+    cache = FieldCache(n=7)
+    write_picture(tmp_path / "demo.png", t, poses, parts, 0, (0.02, -0.02, 0.0), (-0.03, 0.03), LINESINKX, cache,
+                  "test")
+    n = write_animation(tmp_path / "demo.gif", t, poses, parts, 0, (0.02, -0.02, 0.0), None,
+                        lambda tf: LINESINKX if tf > 1.0 else None, cache, frame_dt_s=0.5)
+    assert n == 5
+    png, gif = (tmp_path / "demo.png").read_bytes(), (tmp_path / "demo.gif").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    assert gif[:6] in (b"GIF87a", b"GIF89a")

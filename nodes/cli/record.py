@@ -32,6 +32,8 @@ def default_include(images: bool):
     def include(topic: str, type_name: str) -> bool:
         if type_name == "sensor_msgs/msg/Image" and not images:
             return False
+        if "/_action/" in topic:
+            return False  # action internals (goal/feedback/status): not replayed, no plain msg type
         return topic.startswith("/ppod/") or topic == "/diagnostics"
 
     return include

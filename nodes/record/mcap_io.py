@@ -73,6 +73,8 @@ class McapRecorder:
 
     def discover(self) -> None:
         """Subscribe to newly appeared topics that ``include`` accepts."""
+        if self._closed:
+            return
         for topic, types in self.node.get_topic_names_and_types():
             if topic in self._subs or not types or not self.include(topic, types[0]):
                 continue
@@ -116,10 +118,9 @@ class McapRecorder:
             if self._closed:
                 return
             self._closed = True
-            self.node.destroy_timer(self._timer)
-            for sub in self._subs.values():
-                if sub is not None:
-                    self.node.destroy_subscription(sub)
+            # The subscriptions and the timer stay until the node is destroyed: destroying them here,
+            # from another thread while the executor waits on them, is the rclpy teardown race of
+            # ROS_NOTES.md. Callbacks see _closed and drop what still arrives.
             self._writer.finish()
             self._file.close()
 

@@ -62,7 +62,7 @@ class Task:
 
     def __init__(self, parts: Sequence[PointPart | RigidPart], chosen: int, goal, collect=None, *, device=None,
                  position_tol_m: float = 1e-3, angle_tol_rad: float = math.radians(2.0), timeout_s: float = 60.0,
-                 gain_per_s: float = 0.4, integral_per_s: float = 0.25, settle_s: float = 0.5,
+                 gain_per_s: float = 0.3, integral_per_s: float = 0.25, settle_s: float = 0.5,
                  collect_radius_m: float = 0.04, lost_after_s: float = 2.0):
         if not parts:
             raise ConfigError("parts: expected at least one part")
@@ -105,6 +105,8 @@ class Task:
         self.in_tol_since: float | None = None
         self.held_since: float | None = None
         self.offset = np.zeros(2)  # integral action: where the sink's centre is moved
+        self._applied_offset = np.zeros(2)
+        self._offset_changed_s = -math.inf
         self.phase = "positioning"
         self.current_key: tuple | None = None
         self.finished: TaskStep | None = None
@@ -181,8 +183,14 @@ class Task:
 
     def _motion_for(self, phase: str, me: np.ndarray) -> PlateMotion | None:
         if phase in ("positioning", "holding"):
-            key = ("sink", tuple(np.round(self.offset, 5)))
-            motion = shift_centre(self._sink, *self.offset) if key != self.current_key else None
+            # Each new motion is a new goal for the accelerometer feedback (it re-learns for about a
+            # second): move the sink's centre only in steps of 0.2 mm, at most every 2 s.
+            applied = self._applied_offset
+            due = self.t_last - self._offset_changed_s >= 2.0 and np.hypot(*(self.offset - applied)) >= 2e-4
+            if due:
+                self._applied_offset, self._offset_changed_s = self.offset.copy(), self.t_last
+            key = ("sink", tuple(np.round(self._applied_offset, 6)))
+            motion = shift_centre(self._sink, *self._applied_offset) if key != self.current_key else None
         elif phase == "orienting":
             key = ("orient",)
             motion = orient_motion(self.goal[0], self.goal[1], self.goal_theta, self.device) \

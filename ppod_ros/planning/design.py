@@ -257,7 +257,7 @@ def design_field(spec: FieldSpec, part: PointPart | RigidPart | None = None, *, 
                max(0.0, float(np.abs(currents).sum(axis=0).max()) - 0.9 * lim.coil_current_a)]
         # A light pull towards the basis superposition keeps the design in the regime the basis
         # came from (moderate in-plane amplitudes), where plant errors distort the field least.
-        return np.concatenate([res.reshape(-1), 10.0 * np.array(pen), 0.05 * (v - x0)])
+        return np.concatenate([res.reshape(-1), 10.0 * np.array(pen), 0.02 * (v - x0)])
 
     sol = least_squares(residual, x0, method="trf", x_scale=1.0, diff_step=1e-3, max_nfev=max_evaluations,
                         xtol=1e-6, ftol=1e-6)

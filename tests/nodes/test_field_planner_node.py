@@ -32,7 +32,7 @@ def test_plan_field_designs_a_sink_and_rejects_bad_requests_naming_the_problem(r
 
     _active(ros, ros.make(FieldPlannerNode))
     resp = ros.call(PlanField, "/" + topics.PLAN_FIELD,
-                    PlanField.Request(field_type="sink", params=[0.02, -0.01, 0.3]), timeout_s=30)
+                    PlanField.Request(field_type="sink", params=[0.02, -0.02, 0.3]), timeout_s=30)
     assert resp.success, resp.reason
     assert resp.r_squared >= 0.98 and 0 < resp.valid_fraction <= 1 and resp.seconds > 0
     GoalPlanner(default_device_config()).plan(motion_from_msg(resp.motion))  # within the device's limits

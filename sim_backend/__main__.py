@@ -102,7 +102,8 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"ppod_sim: stopped at device time {dev.time_s:.3f} s after {sim.wall_s:.3f} s wall "
             f"({factor:.1f}x real time); frames sent {dev.frames_tx}, received {dev.counters.accepted}, "
-            f"rejected {dev.counters.rejected_total}; max lag {sim.pacer.max_lag_s * 1e3:.1f} ms",
+            f"rejected {dev.counters.rejected_total}; max lag {sim.pacer.max_lag_s * 1e3:.1f} ms, "
+            f"slipped {sim.pacer.slipped_s:.3f} s in {sim.pacer.slips} stalls",
             flush=True,
         )
         sim.close()

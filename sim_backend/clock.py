@@ -5,6 +5,12 @@ The device keeps its own time (:attr:`ppod_sim.device.SimDevice.time_s`), advanc
 time; 10: ten times faster; ``math.inf``: as fast as the computer allows). When the simulation
 cannot keep up it runs late and reports the lag rather than skipping device time: the device's own
 timing (ramps, watchdog) is always exact in device time.
+
+A stall (a starved process, a garbage collection) is not caught up by racing: device time would
+then run faster than the wall clock while the host's heartbeats keep arriving at wall-clock pace,
+and the device's watchdog would trip on a host that did nothing wrong (a real device never
+stalls). Lag beyond ``max_catch_up_s`` is given up instead: the device clock slips behind the wall
+clock by that much (counted in :attr:`Pacer.slipped_s`) and then runs at the rate again.
 """
 
 from __future__ import annotations
@@ -24,6 +30,9 @@ class Pacer:
     ----------
     rate : float
         Device seconds per wall second, > 0 (``math.inf``: free-running).
+    max_catch_up_s : float
+        Largest lag (wall seconds) made up by running faster than the rate; beyond it the device
+        clock slips.
     clock, sleep : callables, optional
         Wall clock and sleep (for tests).
     """
@@ -31,18 +40,24 @@ class Pacer:
     def __init__(
         self,
         rate: float = 1.0,
+        max_catch_up_s: float = 0.02,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
     ):
         if not (rate > 0):
             raise ConfigError(f"rate: must be > 0 (inf: as fast as possible), got {rate}")
+        if not (max_catch_up_s >= 0):
+            raise ConfigError(f"max_catch_up_s: must be >= 0, got {max_catch_up_s}")
         self.rate = float(rate)
+        self.max_catch_up_s = float(max_catch_up_s)
         self.clock = clock
         self.sleep = sleep
         self._wall0: float | None = None
         self._dev0 = 0.0
         self.lag_s = 0.0
         self.max_lag_s = 0.0
+        self.slipped_s = 0.0
+        self.slips = 0
 
     def start(self, device_time_s: float) -> None:
         self._wall0 = self.clock()
@@ -59,6 +74,12 @@ class Pacer:
         delay = due - self.clock()
         self.lag_s = max(0.0, -delay)
         self.max_lag_s = max(self.max_lag_s, self.lag_s)
+        if self.lag_s > self.max_catch_up_s:
+            # Give the lag up: from now on device time is due relative to this moment.
+            self._wall0 += self.lag_s
+            self.slipped_s += self.lag_s
+            self.slips += 1
+            return
         if delay > 0:
             if stop is not None:
                 stop.wait(delay)

@@ -16,9 +16,18 @@ Scene file (YAML), strictly validated::
 
 The full dynamics (ppod_ros.physics) treats each part alone on the plate. Real parts do not pass
 through each other, and the tracker cannot separate parts closer than about 1.6 mm, so after each
-plate cycle :func:`separate` pushes apart any two parts whose bounding circles overlap (equal and
-opposite moves along the line of centres, the approaching velocity removed): a simple, stated
+plate cycle :func:`separate` pushes apart any two parts whose outlines overlap: a simple, stated
 non-penetration model, not a contact-dynamics one.
+
+- Shape: each outline is covered by a few circles along its long axis (one for a compact part,
+  three for a slender bracket; :func:`circle_cover`), so a long part is not treated as the disc
+  around it.
+- Push: along the line of centres of the most deeply overlapping pair of circles, shared in
+  inverse proportion to the parts' masses (a light washer that runs into a heavy bracket moves
+  most of the way; friction holds the heavy part), and the approaching velocity removed with the
+  same shares. Translation only: contacts exert no torque here.
+- Mass: a rigid part's own; a point part's from its footprint area, its height and
+  ``density_kg_m3`` (steel by default).
 """
 
 from __future__ import annotations
@@ -54,6 +63,25 @@ class ScenePart:
         return fp.outline() if fp is not None else Footprint("disk", (0.002,)).outline()
 
     @property
+    def mass_kg(self) -> float:
+        """The rigid part's mass, or a point part's from footprint area x height x steel density."""
+        if isinstance(self.part, RigidPart):
+            return float(self.part.mass)
+        area = abs(_polygon_area(self.outline))
+        fp = self.part.footprint
+        if fp is not None and fp.kind == "disk":
+            area = math.pi * fp.size[0] ** 2
+        return float(area * self.height_m * DENSITY_KG_M3)
+
+    @property
+    def circles(self) -> np.ndarray:
+        """(K, 3) circles (x, y, r) in the body frame that cover the outline (:func:`circle_cover`)."""
+        fp = self.part.footprint
+        if fp is not None and fp.kind == "disk":
+            return np.array([[0.0, 0.0, fp.size[0]]])
+        return circle_cover(self.outline)
+
+    @property
     def radius_m(self) -> float:
         """Radius of the bounding circle about the pose's point."""
         fp = self.part.footprint
@@ -74,6 +102,10 @@ class Scene:
     @property
     def radii_m(self) -> np.ndarray:
         return np.array([p.radius_m for p in self.parts])
+
+    @property
+    def masses_kg(self) -> np.ndarray:
+        return np.array([p.mass_kg for p in self.parts])
 
     def to_dict(self) -> dict[str, Any]:
         """A scene file with every part placed (scatter resolved): what a recording stores."""
@@ -138,43 +170,117 @@ def load_scene(path: str | Path) -> Scene:
         raise ConfigError(f"{path}: {exc}") from exc
 
 
-def separate(xy: np.ndarray, v: np.ndarray, radii: np.ndarray, active: np.ndarray, gap_m: float = 0.0,
-             iterations: int = 4) -> np.ndarray:
-    """Push overlapping bounding circles apart in place; returns the indices that were moved.
+DENSITY_KG_M3 = 7850.0  # steel: the mass of point parts, which the physics does not need otherwise
+
+
+def _polygon_area(poly: np.ndarray) -> float:
+    x, y = np.asarray(poly, dtype=float).T
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def _inside(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Even-odd test: which of ``points`` (M, 2) lie inside the polygon ``poly`` (K, 2)."""
+    x, y = points[:, 0:1], points[:, 1:2]
+    x0, y0 = poly[:, 0][None], poly[:, 1][None]
+    x1, y1 = np.roll(poly[:, 0], -1)[None], np.roll(poly[:, 1], -1)[None]
+    crosses = (y0 > y) != (y1 > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x_at = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+    return (crosses & (x < x_at)).sum(axis=1) % 2 == 1
+
+
+def circle_cover(outline: np.ndarray, max_circles: int = 5) -> np.ndarray:
+    """Circles (K, 3) (x, y, r) centred on the long axis of ``outline`` that cover all of it.
+
+    K = the outline's length over its width, less 0.3, rounded up (at most ``max_circles``): one
+    circle for a compact part. Centres are evenly spaced along the principal axis; each radius is
+    the largest distance from its centre to the points of the outline (edges and a grid inside)
+    nearer to it than to any other centre, plus the grid spacing, so nothing between the samples is
+    left out.
+    """
+    poly = np.asarray(outline, dtype=float)
+    nxt = np.roll(poly, -1, axis=0)
+    t = np.linspace(0.0, 1.0, 32, endpoint=False)[:, None, None]
+    edges = (poly[None] + t * (nxt - poly)[None]).reshape(-1, 2)
+    lo_xy, hi_xy = poly.min(axis=0), poly.max(axis=0)
+    h = float(np.max(hi_xy - lo_xy)) / 60.0
+    gx, gy = np.meshgrid(np.arange(lo_xy[0], hi_xy[0] + h, h), np.arange(lo_xy[1], hi_xy[1] + h, h))
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    pts = np.concatenate([edges, grid[_inside(grid, poly)]])
+    centre = edges.mean(axis=0)
+    d = edges - centre
+    _, vecs = np.linalg.eigh(d.T @ d)
+    axis, across = vecs[:, 1], vecs[:, 0]
+    along = (pts - centre) @ axis
+    length = float(along.max() - along.min())
+    width = max(float(np.ptp((pts - centre) @ across)), 1e-9)
+    k = int(min(max_circles, max(1, math.ceil(length / width - 0.3))))
+    if k == 1:
+        return np.array([[0.0, 0.0, float(np.max(np.hypot(*poly.T)))]])  # the bounding circle
+    lo, hi = along.min() + length / (2 * k), along.max() - length / (2 * k)
+    centres = centre + np.linspace(lo, hi, k)[:, None] * axis
+    dist = np.linalg.norm(pts[:, None, :] - centres[None], axis=2)
+    nearest = dist.argmin(axis=1)
+    radii = np.array([dist[nearest == j, j].max() if np.any(nearest == j) else 0.0 for j in range(k)]) + h
+    return np.column_stack([centres, radii])
+
+
+def separate(xy: np.ndarray, v: np.ndarray, theta: np.ndarray, circles: list[np.ndarray], masses: np.ndarray,
+             active: np.ndarray, gap_m: float = 0.0, iterations: int = 4) -> np.ndarray:
+    """Push overlapping parts apart in place; returns the indices that were moved.
 
     Parameters
     ----------
     xy : (N, 2) positions (m), modified in place.
     v : (N, 2) velocities (m/s), modified in place: the approaching normal component is removed.
-    radii : (N,) bounding-circle radii (m).
+    theta : (N,) orientations (rad), to place each part's circles.
+    circles : N arrays (K_i, 3) of body-frame circles (x, y, r) covering each outline.
+    masses : (N,) masses (kg): the push is shared in inverse proportion to them.
     active : (N,) bool, parts still on the plate (others are ignored).
-    gap_m : extra clearance kept between circles.
+    gap_m : extra clearance kept between outlines.
     """
     xy = np.asarray(xy)
     moved: set[int] = set()
     idx = np.flatnonzero(active)
+    if idx.size < 2:
+        return np.array([], dtype=int)
+    inv_mass = 1.0 / np.maximum(np.asarray(masses, dtype=float), 1e-9)
+    c, s = np.cos(theta), np.sin(theta)
     for _ in range(iterations):
         any_overlap = False
+        world = {}
+        for i in idx:
+            local = circles[i]
+            rot = np.column_stack([c[i] * local[:, 0] - s[i] * local[:, 1], s[i] * local[:, 0] + c[i] * local[:, 1]])
+            world[i] = (xy[i] + rot, local[:, 2])
         for a_pos, a in enumerate(idx):
+            ca, ra = world[a]
             for b in idx[a_pos + 1:]:
-                d = xy[b] - xy[a]
-                dist = float(np.hypot(*d))
-                need = radii[a] + radii[b] + gap_m
-                if dist >= need:
+                cb, rb = world[b]
+                d = cb[None, :, :] - ca[:, None, :]
+                dist = np.hypot(d[..., 0], d[..., 1])
+                depth = ra[:, None] + rb[None, :] + gap_m - dist
+                ia, ib = np.unravel_index(int(np.argmax(depth)), depth.shape)
+                if depth[ia, ib] <= 0:
                     continue
                 any_overlap = True
-                n = d / dist if dist > 1e-12 else np.array([1.0, 0.0])
-                push = 0.5 * (need - dist)
-                xy[a] -= push * n
-                xy[b] += push * n
+                dd = float(dist[ia, ib])
+                n = d[ia, ib] / dd if dd > 1e-12 else np.array([1.0, 0.0])
+                wa = inv_mass[a] / (inv_mass[a] + inv_mass[b])
+                push = float(depth[ia, ib])
+                xy[a] -= wa * push * n
+                xy[b] += (1.0 - wa) * push * n
+                world[a] = (world[a][0] - wa * push * n, ra)
+                world[b] = (world[b][0] + (1.0 - wa) * push * n, rb)
+                ca = world[a][0]
                 rel = float(np.dot(v[b] - v[a], n))
-                if rel < 0:  # approaching: remove the normal component, share it equally
-                    v[a] += 0.5 * rel * n
-                    v[b] -= 0.5 * rel * n
+                if rel < 0:  # approaching: remove the normal component, shared like the push
+                    v[a] += wa * rel * n
+                    v[b] -= (1.0 - wa) * rel * n
                 moved.update((int(a), int(b)))
         if not any_overlap:
             break
     return np.array(sorted(moved), dtype=int)
 
 
-__all__ = ["Scene", "ScenePart", "load_scene", "scene_from_dict", "separate"]
+__all__ = ["DENSITY_KG_M3", "Scene", "ScenePart", "circle_cover", "load_scene", "scene_from_dict", "separate"]

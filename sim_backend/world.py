@@ -62,7 +62,7 @@ class SimWorld:
     plate_half_size_m : float
         Parts whose centre leaves the square |x|, |y| <= this fall off the plate.
     separation_gap_m : float
-        Clearance kept between parts' bounding circles.
+        Clearance kept between parts' outlines (their circle covers).
     tick_fps : float
         Frame-tick rate without a camera (with one, the camera's fps).
     """
@@ -77,7 +77,8 @@ class SimWorld:
         self.device = self.process.device
         self.dynamics = PartDynamics([p.part for p in scene.parts], scene.poses, settings=solver,
                                      time_s=self.device.time_s)
-        self.radii = scene.radii_m
+        self.circles = [p.circles for p in scene.parts]
+        self.masses = scene.masses_kg
         self.on_plate = np.ones(len(scene.parts), bool)
         self.half_size = plate_half_size_m
         self.gap = separation_gap_m
@@ -149,7 +150,7 @@ class SimWorld:
         state = self.dynamics.advance(motion, start, period)
         xy, v = state.configurations[:, :2].copy(), state.twists[:, :2].copy()
         active = self.on_plate & ~state.contact_lost
-        moved = separate(xy, v, self.radii, active, self.gap)
+        moved = separate(xy, v, state.configurations[:, 2], self.circles, self.masses, active, self.gap)
         for i in moved:
             self.dynamics.set_part(int(i), [xy[i, 0], xy[i, 1], state.configurations[i, 2]],
                                    [v[i, 0], v[i, 1], state.twists[i, 2]])

@@ -5,9 +5,11 @@ A plate field moves every part at once, so the sequence is built on one sink, ce
   positioning  the sink designed for the goal (design_field, cached). Integral action moves the
                sink's centre (shift_centre: an exact change of a_z, no redesign) to cancel the
                steady offset that the real plate (plant mismatch, friction differences) produces.
-  turning      rigid parts more than 60 degrees from the goal orientation: a rotation field about
-               the part spins it in place (the orienting field has two stable orientations, theta
-               and theta + pi, and must start on the right side).
+  turning      rigid parts more than 15 degrees from the goal orientation (until within 8): a
+               rotation field about the part spins it in place, first of all, before the others
+               come near (it turns at 0.3 rad/s; the orienting field below converges more slowly and
+               has two stable orientations, theta and theta + pi, so it must start on the right
+               side).
   orienting    rigid parts: the rotated u1 motion whose line sink passes through the goal
                (design kind "orient"): the part turns to theta while it stays on that line.
   holding      the part is within tolerance; with ``collect``, the sink stays on while the other
@@ -162,19 +164,18 @@ class Task:
         # Integral action on the sink centre while positioning or holding (close to the goal only).
         if dist < 0.01 and self.phase in ("positioning", "holding"):
             self.offset = np.clip(self.offset + self.ki * dt * err, -0.01, 0.01)
-        phase = self._choose_phase(dist, ang, pos_ok, ang_ok)
+        phase = self._choose_phase(dist, ang, pos_ok, ang_ok, me)
         motion = self._motion_for(phase, me)
         self.phase = phase
         text = (f"{phase}: {1e3 * dist:.2f} mm" + ("" if ang is None else f", {math.degrees(ang):+.1f} deg")
                 + " from the goal" + (f"; others within {1e3 * spread:.0f} mm" if self.collect and others else ""))
         return TaskStep(motion, phase, False, None, dist, ang, text)
 
-    def _choose_phase(self, dist: float, ang: float | None, pos_ok: bool, ang_ok: bool) -> str:
+    def _choose_phase(self, dist: float, ang: float | None, pos_ok: bool, ang_ok: bool, me: np.ndarray) -> str:
+        if ang is not None and math.hypot(*me[:2]) <= CENTRE_RADIUS_M - 0.005:
+            if abs(ang) > math.radians(15) or (self.phase == "turning" and abs(ang) > math.radians(8)):
+                return "turning"
         if ang is not None and not ang_ok and dist <= max(3 * self.tol, 0.003):
-            if abs(ang) > math.radians(60):
-                return "turning"
-            if self.phase == "turning" and abs(ang) > math.radians(30):
-                return "turning"
             return "orienting"
         if self.phase == "orienting" and ang is not None and abs(ang) > self.angle_tol / 2 \
                 and dist <= max(3 * self.tol, 0.003):

@@ -100,13 +100,7 @@ def marker_dictionary(name: str) -> cv2.aruco.Dictionary:
 def detect_markers(image: np.ndarray, layout: PlateLayout) -> dict[int, np.ndarray]:
     """Corners (4, 2) in pixels, ArUco order, of the layout's markers found in ``image``."""
     gray = to_gray(image)
-    params = cv2.aruco.DetectorParameters()
-    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-    params.cornerRefinementWinSize = 4
-    params.cornerRefinementMinAccuracy = 0.005
-    params.cornerRefinementMaxIterations = 60
-    detector = cv2.aruco.ArucoDetector(marker_dictionary(layout.marker_dictionary), params)
-    corners, ids, _ = detector.detectMarkers(gray)
+    corners, ids, _ = _marker_detector(layout.marker_dictionary).detectMarkers(gray)
     wanted = {m[0] for m in layout.markers}
     found: dict[int, np.ndarray] = {}
     if ids is None:
@@ -182,6 +176,115 @@ def calibrate_plate_from_markers(
         len(obj),
         "markers",
     )
+
+
+@dataclass(frozen=True)
+class PlateShift:
+    """Where the plate is in a frame relative to where it was calibrated: an in-plane rigid move.
+
+    A point at ``xy`` on the plate appears at ``R(dtheta) xy + (dx, dy)`` in the calibrated frame.
+    The camera is phase-locked to the plate's cycle, so a vibrating plate is caught at the same
+    displacement in every frame of one motion, but that displacement changes with the motion (a
+    few tenths of a millimetre): left uncorrected it would bias every part pose.
+    """
+
+    dx_m: float
+    dy_m: float
+    dtheta_rad: float
+    markers: int
+    rms_m: float
+
+    def to_plate(self, xy_m: np.ndarray, theta_rad: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Undo the shift: calibrated-frame points (N, 2) and angles to the plate's own frame."""
+        c, s = math.cos(self.dtheta_rad), math.sin(self.dtheta_rad)
+        d = np.asarray(xy_m, dtype=float).reshape(-1, 2) - (self.dx_m, self.dy_m)
+        xy = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+        return xy, np.asarray(theta_rad, dtype=float) - self.dtheta_rad
+
+
+def measure_plate_shift(
+    image: np.ndarray,
+    calibration: PlateCalibration,
+    layout: PlateLayout,
+    *,
+    margin_px: int | None = None,
+    min_markers: int = 2,
+    max_markers: int = 4,
+) -> PlateShift | None:
+    """The plate's in-plane shift (:class:`PlateShift`) from its markers, or None if too few are seen.
+
+    Each marker is looked for only in a small window around where the calibration puts it (the
+    plate moves by a fraction of a millimetre), so this costs a few small detections per frame.
+    The marker corners seen are mapped to the calibrated plate frame and fitted with a 2D rigid
+    transform (least squares, Kabsch). ``margin_px`` (default: the marker's side in pixels, at
+    least 16) is the quiet zone around the expected place that the detector needs. At most
+    ``max_markers`` are used, spread over the plate (the farthest apart first).
+    """
+    gray = to_gray(image)
+    h, w = gray.shape[:2]
+    detector = _marker_detector(layout.marker_dictionary)
+    src, dst, n = [], [], 0
+    for mid, corners_m in _spread(layout.marker_corners()):
+        if n >= max_markers:
+            break
+        uv = calibration.plate_to_image(corners_m)
+        side = float(np.max(np.ptp(uv, axis=0)))
+        margin = int(math.ceil(max(16.0, side))) if margin_px is None else int(margin_px)
+        u0, v0 = (np.floor(uv.min(axis=0)) - margin).astype(int)
+        u1, v1 = (np.ceil(uv.max(axis=0)) + margin).astype(int)
+        u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
+        if u1 - u0 < 8 or v1 - v0 < 8:
+            continue
+        found, ids, _ = detector.detectMarkers(np.ascontiguousarray(gray[v0:v1, u0:u1]))
+        if ids is None:
+            continue
+        for c, i in zip(found, ids.ravel()):
+            if int(i) == mid:
+                seen = calibration.image_to_plate(c.reshape(4, 2).astype(np.float64) + (u0, v0))
+                src.append(corners_m)
+                dst.append(seen)
+                n += 1
+                break
+    if n < min_markers:
+        return None
+    a, b = np.concatenate(src), np.concatenate(dst)
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    hmat = (a - ca).T @ (b - cb)
+    u, _, vt = np.linalg.svd(hmat)
+    r = vt.T @ u.T
+    if np.linalg.det(r) < 0:
+        vt[-1] *= -1
+        r = vt.T @ u.T
+    t = cb - r @ ca
+    resid = b - (a @ r.T + t)
+    return PlateShift(float(t[0]), float(t[1]), float(math.atan2(r[1, 0], r[0, 0])), n,
+                      float(np.sqrt(np.mean(np.sum(resid**2, axis=1)))))
+
+
+def _spread(corners: dict[int, np.ndarray]) -> list[tuple[int, np.ndarray]]:
+    """Markers ordered so that each next one is the farthest from those before (a spread-out subset)."""
+    items = list(corners.items())
+    centres = np.array([c.mean(axis=0) for _, c in items])
+    order = [int(np.argmax(np.hypot(*centres.T)))]
+    while len(order) < len(items):
+        d = np.min(np.linalg.norm(centres[:, None] - centres[order][None], axis=2), axis=1)
+        d[order] = -1.0
+        order.append(int(np.argmax(d)))
+    return [items[i] for i in order]
+
+
+_DETECTORS: dict[str, cv2.aruco.ArucoDetector] = {}
+
+
+def _marker_detector(dictionary: str) -> cv2.aruco.ArucoDetector:
+    if dictionary not in _DETECTORS:
+        params = cv2.aruco.DetectorParameters()
+        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        params.cornerRefinementWinSize = 4
+        params.cornerRefinementMinAccuracy = 0.005
+        params.cornerRefinementMaxIterations = 60
+        _DETECTORS[dictionary] = cv2.aruco.ArucoDetector(marker_dictionary(dictionary), params)
+    return _DETECTORS[dictionary]
 
 
 def find_checkerboard(image: np.ndarray, board: Checkerboard) -> np.ndarray | None:
@@ -299,6 +402,8 @@ def _reprojection_errors(
 __all__ = [
     "CalibrationError",
     "Checkerboard",
+    "PlateShift",
+    "measure_plate_shift",
     "IntrinsicsResult",
     "calibrate_intrinsics",
     "calibrate_plate_from_checkerboard",

@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from ppod_ros.errors import ConfigError
-from ppod_ros.vision.calibration import calibrate_plate_from_markers
+from ppod_ros.vision.calibration import PlateShift, calibrate_plate_from_markers, measure_plate_shift
 from ppod_ros.vision.camera import CameraConfig
 from ppod_ros.vision.detection import Blob, BlobDetector
 from ppod_ros.vision.frames import BadFrameError, check_frame, check_stamp, to_gray
@@ -103,6 +103,9 @@ class PartTracker:
         self.specs = specs
         self.settings = settings or TrackerSettings()
         self._calibration: PlateCalibration | None = None
+        #: The plate's last measured shift from its calibrated place (None: not measured yet).
+        self.plate_shift: PlateShift | None = None
+        self.plate_shift_misses = 0
         self._detector: BlobDetector | None = None
         self._tracks: list[_Track] = []
         self._next_id = 1
@@ -172,6 +175,8 @@ class PartTracker:
             if tr.status != TrackStatus.LOST:
                 tr.filter.predict(dt)
         measurements, unexplained = self._classify(blobs)
+        if self.settings.follow_plate:
+            measurements = self._follow_plate(img, measurements)
         matched = self._associate(measurements)
         new_ids, reacquired = self._birth_and_reacquire(measurements, matched, stamp)
         lost, forgotten = self._coast(matched, unexplained, stamp)
@@ -192,6 +197,22 @@ class PartTracker:
             tuple(forgotten),
             time.perf_counter() - t0,
         )
+
+    def _follow_plate(self, img: np.ndarray, measurements: list[_Measurement]) -> list[_Measurement]:
+        """Poses in the moving plate's frame: undo the plate's shift measured from its markers."""
+        assert self._calibration is not None
+        shift = measure_plate_shift(img, self._calibration, self.camera.plate)
+        if shift is None:
+            self.plate_shift_misses += 1
+            shift = self.plate_shift  # keep the last one (the motion rarely changes between frames)
+        else:
+            self.plate_shift = shift
+        if shift is None or not measurements:
+            return measurements
+        xy, th = shift.to_plate(np.array([(m.fit.x_m, m.fit.y_m) for m in measurements]),
+                                np.array([m.fit.theta_rad for m in measurements]))
+        return [_Measurement(m.spec, replace(m.fit, x_m=float(p[0]), y_m=float(p[1]), theta_rad=float(t)),
+                             m.blob) for m, p, t in zip(measurements, xy, th)]
 
     def _classify(self, blobs: list[Blob]) -> tuple[list[_Measurement], list[tuple[str, Blob]]]:
         s = self.settings

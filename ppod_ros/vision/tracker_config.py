@@ -25,6 +25,8 @@ class TrackerSettings:
     max_coast_s : a track unmeasured for longer is LOST.
     forget_after_s : a LOST track is dropped after this long.
     reacquire_radius_m : how far from where it was lost a part may reappear and keep its id.
+    follow_plate : measure the plate's in-plane shift from its markers in every frame and give poses
+        in the moving plate's frame (a vibrating plate is caught displaced by the motion's amplitude).
     """
 
     detector: DetectorSettings = field(default_factory=DetectorSettings)
@@ -37,6 +39,7 @@ class TrackerSettings:
     max_coast_s: float = 1.0
     forget_after_s: float = 300.0
     reacquire_radius_m: float = 0.03
+    follow_plate: bool = True
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], where: str = "tracker") -> TrackerSettings:
@@ -82,8 +85,9 @@ class TrackerSettings:
                 "reacquire_radius_m",
             )
         }
+        follow = f.boolean("follow_plate", d.follow_plate)
         f.finish()
-        return cls(detector=detector, filter=filt, **kw)
+        return cls(detector=detector, filter=filt, follow_plate=follow, **kw)
 
 
 def load_part_specs(items: Sequence[Mapping[str, Any]], where: str = "parts") -> list[PartSpec]:

@@ -288,3 +288,23 @@ def test_tracker_rejects_duplicate_labels_and_mismatched_calibrations(camera, ca
         PartTracker(camera, [PIN, PIN])
     with pytest.raises(ConfigError, match="made for 1280x1024"):
         PartTracker(camera.with_changes(width=640, height=512), [PIN], calibration=calibration)
+
+
+@pytest.mark.parametrize("follow", [True, False], ids=["following the plate", "not following"])
+def test_poses_are_in_the_vibrating_plates_frame_when_following_its_markers(camera, calibration, renderer, follow):
+    # A phase-locked camera catches the plate displaced by the motion (here 0.4 mm, 0.3 mm and
+    # 0.25 degrees in plane, plus some heave and tilt): part poses are wanted in the plate's frame.
+    disp = np.array([4e-4, -3e-4, 2e-4, 1e-3, -1e-3, math.radians(0.25)])
+    tracker = PartTracker(camera, [PIN, TAB], calibration=calibration, settings=TrackerSettings(follow_plate=follow))
+    placed = [(PIN, (0.05, -0.04, 0.3)), (TAB, (-0.06, 0.07, -1.0))]
+    result = tracker.update(render(renderer, placed, 0.0, plate_displacement=disp).image, 0.0)
+    errors = [math.hypot(nearest(result, p).x_m - p[0], nearest(result, p).y_m - p[1]) for _, p in placed]
+    if follow:
+        for _, pose in placed:
+            check_pose(nearest(result, pose), pose)
+        shift = tracker.plate_shift
+        assert shift.markers >= 3
+        assert shift.dx_m == pytest.approx(4e-4, abs=5e-5) and shift.dy_m == pytest.approx(-3e-4, abs=5e-5)
+        assert shift.dtheta_rad == pytest.approx(math.radians(0.25), abs=math.radians(0.03))
+    else:
+        assert min(errors) > 3e-4  # the bias the plate's shift gives without the correction

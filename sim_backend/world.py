@@ -29,6 +29,7 @@ import numpy as np
 
 from ppod_ros.device.config import DeviceConfig
 from ppod_ros.physics import DynamicsState, PartDynamics, SolverSettings
+from ppod_ros.physics.settings import REASONS
 from ppod_ros.vision.camera import CameraConfig
 from ppod_sim.camera import CameraRenderer, RenderedFrame, RenderPart
 from ppod_sim.process import SimProcess
@@ -78,6 +79,7 @@ class SimWorld:
         self.dynamics = PartDynamics([p.part for p in scene.parts], scene.poses, settings=solver,
                                      time_s=self.device.time_s)
         self.circles = [p.circles for p in scene.parts]
+        self.hops = 0  # parts that lost contact and were put back on the plate
         self.masses = scene.masses_kg
         self.on_plate = np.ones(len(scene.parts), bool)
         self.half_size = plate_half_size_m
@@ -148,6 +150,17 @@ class SimWorld:
         motion = truth.motion().time_shifted(-start)
         t0 = time.perf_counter()
         state = self.dynamics.advance(motion, start, period)
+        hopped = np.flatnonzero(self.on_plate & (state.status != 0))
+        for i in hopped:
+            # Contact lost (or the integration gave up): the part hops and lands where it is. The
+            # dynamics cannot follow a flight; the part is put back on the plate at rest.
+            self.hops += 1
+            log.warning("part %d (%s) lost contact (%s) at (%.3f, %.3f): put back on the plate at rest",
+                        i, self.scene.parts[i].label, REASONS.get(int(state.status[i]), "?"),
+                        *state.configurations[i, :2])
+            self.dynamics.set_part(int(i), state.configurations[i])
+        if hopped.size:
+            state = self.dynamics.state
         xy, v = state.configurations[:, :2].copy(), state.twists[:, :2].copy()
         active = self.on_plate & ~state.contact_lost
         moved = separate(xy, v, state.configurations[:, 2], self.circles, self.masses, active, self.gap)

@@ -7,9 +7,8 @@ A plate field moves every part at once, so the sequence is built on one sink, ce
                steady offset that the real plate (plant mismatch, friction differences) produces.
   turning      rigid parts more than 15 degrees from the goal orientation (until within 8): a
                rotation field about the part spins it in place, first of all, before the others
-               come near (it turns at 0.3 rad/s; the orienting field below converges more slowly and
-               has two stable orientations, theta and theta + pi, so it must start on the right
-               side).
+               come near (0.3 rad/s asked; the orienting field below converges more slowly and has
+               two stable orientations, theta and theta + pi, so it must start on the right side).
   orienting    rigid parts: the rotated u1 motion whose line sink passes through the goal
                (design kind "orient"): the part turns to theta while it stays on that line.
   holding      the part is within tolerance; with ``collect``, the sink stays on while the other
@@ -64,7 +63,7 @@ class Task:
 
     def __init__(self, parts: Sequence[PointPart | RigidPart], chosen: int, goal, collect=None, *, device=None,
                  position_tol_m: float = 1e-3, angle_tol_rad: float = math.radians(2.0), timeout_s: float = 60.0,
-                 gain_per_s: float = 0.3, integral_per_s: float = 0.25, settle_s: float = 0.5,
+                 gain_per_s: float = 0.3, integral_per_s: float = 0.5, settle_s: float = 0.5,
                  collect_radius_m: float = 0.04, lost_after_s: float = 2.0):
         if not parts:
             raise ConfigError("parts: expected at least one part")
@@ -172,22 +171,22 @@ class Task:
         return TaskStep(motion, phase, False, None, dist, ang, text)
 
     def _choose_phase(self, dist: float, ang: float | None, pos_ok: bool, ang_ok: bool, me: np.ndarray) -> str:
-        if ang is not None and math.hypot(*me[:2]) <= CENTRE_RADIUS_M - 0.005:
-            if abs(ang) > math.radians(15) or (self.phase == "turning" and abs(ang) > math.radians(8)):
-                return "turning"
-        if ang is not None and not ang_ok and dist <= max(3 * self.tol, 0.003):
+        near = dist <= max(3 * self.tol, 0.003)
+        turnable = ang is not None and math.hypot(*me[:2]) <= CENTRE_RADIUS_M - 0.005
+        if turnable and (abs(ang) > math.radians(15) or (self.phase == "turning" and abs(ang) > math.radians(8))):
+            return "turning"
+        # Orient when out of tolerance; once orienting, finish (hysteresis: down to half the
+        # tolerance), the orienting line keeps the part near the goal.
+        if ang is not None and near and (not ang_ok or (self.phase == "orienting" and abs(ang) > self.angle_tol / 2)):
             return "orienting"
-        if self.phase == "orienting" and ang is not None and abs(ang) > self.angle_tol / 2 \
-                and dist <= max(3 * self.tol, 0.003):
-            return "orienting"  # finish orienting (hysteresis), the line keeps the part near the goal
         return "holding" if pos_ok else "positioning"
 
     def _motion_for(self, phase: str, me: np.ndarray) -> PlateMotion | None:
         if phase in ("positioning", "holding"):
             # Each new motion is a new goal for the accelerometer feedback (it re-learns for about a
-            # second): move the sink's centre only in steps of 0.2 mm, at most every 2 s.
+            # second): move the sink's centre only in steps of 0.2 mm or more, at most every second.
             applied = self._applied_offset
-            due = self.t_last - self._offset_changed_s >= 2.0 and np.hypot(*(self.offset - applied)) >= 2e-4
+            due = self.t_last - self._offset_changed_s >= 1.0 and np.hypot(*(self.offset - applied)) >= 2e-4
             if due:
                 self._applied_offset, self._offset_changed_s = self.offset.copy(), self.t_last
             key = ("sink", tuple(np.round(self._applied_offset, 6)))

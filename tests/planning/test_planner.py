@@ -81,7 +81,9 @@ def _closed_loop(parts, start, goal, collect=None, horizon_s=40.0, seed=0):
         if step.done or step.failed_reason:
             break
         if motion is not None:
-            dyn.advance(motion, t, 0.1)
+            state = dyn.advance(motion, t, 0.1)
+            for i in np.flatnonzero(state.status != 0):
+                dyn.set_part(int(i), state.configurations[i])  # a hop: lands at rest, as on the simulated device
         t += 0.1
     return step, dyn.state.configurations, t
 

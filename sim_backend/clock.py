@@ -9,8 +9,10 @@ timing (ramps, watchdog) is always exact in device time.
 A stall (a starved process, a garbage collection) is not caught up by racing: device time would
 then run faster than the wall clock while the host's heartbeats keep arriving at wall-clock pace,
 and the device's watchdog would trip on a host that did nothing wrong (a real device never
-stalls). Lag beyond ``max_catch_up_s`` is given up instead: the device clock slips behind the wall
-clock by that much (counted in :attr:`Pacer.slipped_s`) and then runs at the rate again.
+stalls). Lag beyond ``max_catch_up_s`` (50 ms: with heartbeats every 50 ms, a catch-up then leaves
+gaps of at most 100 ms of device time, under the 150 ms watchdog) is given up instead: the device
+clock slips behind the wall clock by that much (counted in :attr:`Pacer.slipped_s`) and then runs
+at the rate again.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ class Pacer:
     def __init__(
         self,
         rate: float = 1.0,
-        max_catch_up_s: float = 0.02,
+        max_catch_up_s: float = 0.05,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
     ):

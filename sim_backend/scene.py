@@ -26,8 +26,8 @@ non-penetration model, not a contact-dynamics one.
   inverse proportion to the parts' masses (a light washer that runs into a heavy bracket moves
   most of the way; friction holds the heavy part), and the approaching velocity removed with the
   same shares. Translation only: contacts exert no torque here.
-- Mass: a rigid part's own; a point part's from its footprint area, its height and
-  ``density_kg_m3`` (steel by default).
+- Mass: a rigid part's own; a point part's from its footprint area, its height and the density
+  of steel (``DENSITY_KG_M3``).
 """
 
 from __future__ import annotations
@@ -67,18 +67,12 @@ class ScenePart:
         """The rigid part's mass, or a point part's from footprint area x height x steel density."""
         if isinstance(self.part, RigidPart):
             return float(self.part.mass)
-        area = abs(_polygon_area(self.outline))
-        fp = self.part.footprint
-        if fp is not None and fp.kind == "disk":
-            area = math.pi * fp.size[0] ** 2
-        return float(area * self.height_m * DENSITY_KG_M3)
+        fp = self.part.footprint or Footprint("disk", (0.002,))
+        return float(fp.area_m2 * self.height_m * DENSITY_KG_M3)
 
     @property
     def circles(self) -> np.ndarray:
         """(K, 3) circles (x, y, r) in the body frame that cover the outline (:func:`circle_cover`)."""
-        fp = self.part.footprint
-        if fp is not None and fp.kind == "disk":
-            return np.array([[0.0, 0.0, fp.size[0]]])
         return circle_cover(self.outline)
 
     @property
@@ -98,10 +92,6 @@ class Scene:
     @property
     def poses(self) -> np.ndarray:
         return np.array([p.pose for p in self.parts]).reshape(-1, 3)
-
-    @property
-    def radii_m(self) -> np.ndarray:
-        return np.array([p.radius_m for p in self.parts])
 
     @property
     def masses_kg(self) -> np.ndarray:
@@ -171,11 +161,6 @@ def load_scene(path: str | Path) -> Scene:
 
 
 DENSITY_KG_M3 = 7850.0  # steel: the mass of point parts, which the physics does not need otherwise
-
-
-def _polygon_area(poly: np.ndarray) -> float:
-    x, y = np.asarray(poly, dtype=float).T
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
 def _inside(points: np.ndarray, poly: np.ndarray) -> np.ndarray:

@@ -79,7 +79,6 @@ class SimWorld:
         self.dynamics = PartDynamics([p.part for p in scene.parts], scene.poses, settings=solver,
                                      time_s=self.device.time_s)
         self.circles = [p.circles for p in scene.parts]
-        self.hops = 0  # parts that lost contact and were put back on the plate
         self.masses = scene.masses_kg
         self.on_plate = np.ones(len(scene.parts), bool)
         self.half_size = plate_half_size_m
@@ -154,7 +153,6 @@ class SimWorld:
         for i in hopped:
             # Contact lost (or the integration gave up): the part hops and lands where it is. The
             # dynamics cannot follow a flight; the part is put back on the plate at rest.
-            self.hops += 1
             log.warning("part %d (%s) lost contact (%s) at (%.3f, %.3f): put back on the plate at rest",
                         i, self.scene.parts[i].label, REASONS.get(int(state.status[i]), "?"),
                         *state.configurations[i, :2])

@@ -73,14 +73,16 @@ def test_sigkill_of_the_waveform_generator_brings_the_plate_to_rest_within_300_m
     from ppod_nodes.common.convert import stamp_to_seconds
     from ppod_nodes.common.session import RosSession
 
-    nodes = [SIM, {**GENERATOR, "required": False}]
+    nodes = [node(SIM, mismatch="zero"), {**GENERATOR, "required": False}]
     with running_stack(tmp_path, nodes) as stack, RosSession("system_test") as ros:
         truth = _collect(ros, PlateAcceleration, topics.SIM_TRUE_ACCELERATION, qos.STREAM)
         status = _collect(ros, PlateMotionStatus, topics.MOTION_STATUS, qos.LATCHED)
         goal = _send_goal(ros)
         assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_ACTIVE for s in status), 30), \
             log_text(tmp_path)[-3000:]
-        assert ros.wait_until(lambda: len(truth) >= 5, 20), log_text(tmp_path)[-3000:]  # the plate runs it
+        # The plate runs the goal (past its ramp, whenever that lands under load) before the kill.
+        assert ros.wait_until(lambda: truth and _truth_error(truth[-1], goal) < 0.05, 30), \
+            (log_text(tmp_path)[-3000:], _device_story(tmp_path))
         pid = next(c.process.pid for c in stack.supervisor.children if c.spec.name == "waveform_generator")
         os.kill(pid, signal.SIGKILL)
         # The device's own record: the state change to WATCHDOG names the last heartbeat it received
@@ -91,7 +93,7 @@ def test_sigkill_of_the_waveform_generator_brings_the_plate_to_rest_within_300_m
         assert ros.wait_until(lambda: stamp_to_seconds(truth[-1].header.stamp) > last_heartbeat_s + 0.8, 15)
         before = [_truth_error(m, goal) for m in truth if stamp_to_seconds(m.header.stamp) < last_heartbeat_s]
         after = [m for m in truth if stamp_to_seconds(m.header.stamp) >= last_heartbeat_s + 0.3]
-    assert before and min(before) < 0.3  # the plate was running the goal
+    assert before and min(before) < 0.05  # the plate was running the goal
     fund = np.linalg.norm(goal.phasor_table(1) * np.array([1, 1, 1, 0.1, 0.1, 0.1]))
     residual = [np.linalg.norm(np.array([h.amplitude for h in m.measured]) * np.array([1, 1, 1, 0.1, 0.1, 0.1]))
                 / fund for m in after]

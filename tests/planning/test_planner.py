@@ -50,6 +50,27 @@ def test_designed_linear_fields_reach_r2_098_within_the_device_limits(field_type
     assert again.cached and again.motion.key == result.motion.key
 
 
+def test_two_frequency_designs_refine_the_one_frequency_optimum_within_the_device_limits():
+    spec = FieldSpec.from_request("rotation", [0.02, 0.01, 0.2])
+    one = design_field(spec)
+    two = design_field(spec, harmonics=2)
+    assert list(two.motion.k) == [1, 2] and np.abs(two.motion.phasor_table(2)[1]).max() > 0.1
+    assert two.r2 >= max(one.r2, 0.98), (one.r2, two.r2, two.messages)
+    assert two.valid_fraction == 1.0
+    GoalPlanner(default_device_config()).plan(two.motion)
+    # Its field, solved independently, is the one reported (the fit is not an artefact of the grid).
+    pts = np.array([[0.035, -0.02], [-0.05, 0.03]])
+    v = solve_field(two.motion, PointPart(0.3), pts).velocity
+    target = spec.target_velocity(pts[:, 0], pts[:, 1])
+    assert np.allclose(v, target, atol=0.15 * np.abs(target).max())
+
+
+def test_a_second_harmonic_is_not_searched_for_when_one_frequency_already_fits():
+    two = design_field(FieldSpec.from_request("sink", [0.0, 0.0, 0.3]), harmonics=2)
+    assert list(two.motion.k) == [1, 2] and np.all(two.motion.phasor_table(2)[1] == 0)
+    assert two.r2 >= 0.999 and any("not needed" in m for m in two.messages)
+
+
 def test_the_line_sink_basis_has_the_published_sign_and_the_centre_shift_moves_it():
     motion = design_field(FieldSpec.from_request("line_sink", [0.0, 0.0, math.pi / 2, 0.3])).motion
     v = solve_field(motion, PointPart(0.3), [[0.04, 0.0], [-0.04, 0.0]]).velocity

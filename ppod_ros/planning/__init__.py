@@ -4,13 +4,16 @@
 - :func:`design_field` -> :class:`DesignResult`: the plate motion whose asymptotic field matches it,
   within the device's limits.
 - :class:`Task`: bring a tracked part to a goal pose from camera feedback, step by step.
+- :func:`plan_sensorless` -> :class:`SensorlessPlan`, played by :class:`SensorlessTask`: the same
+  without a camera, from the stable fixed points of the fields.
 
 Nothing here imports rclpy or message types.
 """
 
 from ppod_ros.planning.design import DEFAULT_FREQUENCY_HZ, DesignResult, design_field, evaluate
+from ppod_ros.planning.sensorless import SensorlessPlan, SensorlessTask, plan_sensorless
 from ppod_ros.planning.specs import FieldSpec
 from ppod_ros.planning.task import Task, TaskStep, orient_motion
 
-__all__ = ["DEFAULT_FREQUENCY_HZ", "DesignResult", "FieldSpec", "Task", "TaskStep", "design_field", "evaluate",
-           "orient_motion"]
+__all__ = ["DEFAULT_FREQUENCY_HZ", "DesignResult", "FieldSpec", "SensorlessPlan", "SensorlessTask", "Task",
+           "TaskStep", "design_field", "evaluate", "orient_motion", "plan_sensorless"]

@@ -11,14 +11,17 @@ Lifecycle node (STYLE.md rule 9); the logic is ppod_ros.planning (docs/planner.m
 Interfaces (names in ppod_nodes.common.topics):
   ppod/plan_field  (ppod_msgs/PlanField)   design a motion for a field; ``apply`` publishes it
   ppod/move_part   (ppod_msgs/MovePart)    closed loop: bring part ``part_id`` to a pose, choosing
-                                           and updating fields from the tracked poses (a Task)
+                                           and updating fields from the tracked poses (a Task); with
+                                           ``sensorless``, a plan of fields played open loop on the
+                                           node's clock (a SensorlessTask), poses only reported
   ppod/part_poses  (in)                    the tracker's poses; the Task steps on each array
   ppod/plate_motion_goal (out)             the motions it designs, for the waveform generator
   ppod/stop        (client)                ramp the plate down when a task ends or is cancelled
 
 One MovePart goal runs at a time (a field moves every part on the plate); a new goal is rejected
-while one runs. The Task steps in the pose subscription's callback; the action's execute
-coroutine only waits for its outcome, so the single-threaded executor never blocks on it.
+while one runs. The Task steps in the pose subscription's callback, a SensorlessTask in a 10 Hz
+timer (device time under ``ppod up --sim``: use_sim_time); the action's execute coroutine only
+waits for the outcome, so the single-threaded executor never blocks on it.
 Diagnostics: the last design (kind, R^2, seconds) and the running task (phase, errors).
 """
 
@@ -49,7 +52,7 @@ from ppod_ros.config.fields import Fields, load_yaml_file
 from ppod_ros.device import load_device_config
 from ppod_ros.errors import ConfigError, PpodError
 from ppod_ros.parts import Footprint, PointPart, part_from_dict, part_from_yaml_text
-from ppod_ros.planning import FieldSpec, Task, design_field
+from ppod_ros.planning import FieldSpec, SensorlessTask, Task, design_field, plan_sensorless
 
 
 def part_models_from_tracker_file(path: str | Path, default_mu: float) -> dict[str, Any]:
@@ -73,7 +76,7 @@ def part_models_from_tracker_file(path: str | Path, default_mu: float) -> dict[s
 class _RunningTask:
     """The MovePart goal being executed: its handle, the Task, the track ids in Task order."""
 
-    def __init__(self, handle, task: Task, ids: list[int], goal, started_s: float):
+    def __init__(self, handle, task: Task | SensorlessTask, ids: list[int], goal, started_s: float):
         self.handle = handle
         self.task = task
         self.ids = ids
@@ -110,6 +113,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         self._stop_client = self.create_client(Trigger, topics.STOP)
         self._action = ActionServer(self, MovePart, topics.MOVE_PART, execute_callback=self._execute,
                                     goal_callback=self._on_goal_request, cancel_callback=self._on_cancel)
+        self.create_timer(0.1, self._on_sensorless_tick)
 
     # ------------------------------------------------------------------ lifecycle
     def on_configure_node(self, params):
@@ -172,7 +176,8 @@ class FieldPlannerNode(PpodLifecycleNode):
         if self.running is not None:
             self.get_logger().warning("MovePart rejected: another goal is running (a field moves every part)")
             return GoalResponse.REJECT
-        if self._poses is None or not any(p.id == goal.part_id for p in self._poses.parts):
+        tracked = self._poses is not None and any(p.id == goal.part_id for p in self._poses.parts)
+        if not tracked and not goal.sensorless:
             self.get_logger().warning(f"MovePart rejected: part {goal.part_id} is not tracked")
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
@@ -180,9 +185,9 @@ class FieldPlannerNode(PpodLifecycleNode):
     def _on_cancel(self, _handle) -> CancelResponse:
         return CancelResponse.ACCEPT
 
-    def _build_task(self, goal: MovePart.Goal) -> tuple[Task, list[int]]:
+    def _build_task(self, goal: MovePart.Goal) -> tuple[Task | SensorlessTask, list[int]]:
         parts, ids = [], []
-        for p in self._poses.parts:
+        for p in (self._poses.parts if self._poses is not None else []):
             model = self.models.get(p.label)
             if model is None:
                 model = PointPart(mu=self.params["default_mu"])
@@ -191,12 +196,24 @@ class FieldPlannerNode(PpodLifecycleNode):
             ids.append(int(p.id))
         p = self.params
         theta = float(goal.target.theta) if goal.use_orientation else None
+        target = (float(goal.target.x), float(goal.target.y), theta)
+        position_tol = goal.position_tolerance_m or p["position_tolerance_m"]
+        angle_tol = goal.orientation_tolerance_rad or math.radians(p["orientation_tolerance_deg"])
+        if goal.sensorless:
+            if int(goal.part_id) not in ids:  # never seen: the default model, reported in the poses as unseen
+                self.get_logger().warning(f"sensorless: part {goal.part_id} is not tracked: planned as a point part "
+                                          f"with mu {p['default_mu']:g}")
+                parts.append(PointPart(mu=p["default_mu"]))
+                ids.append(int(goal.part_id))
+            chosen = ids.index(int(goal.part_id))
+            plan = plan_sensorless(parts[chosen], target, device=self.device, position_tol_m=position_tol,
+                                   angle_tol_rad=angle_tol)
+            for line in plan.describe().splitlines():
+                self.get_logger().info(line)
+            return SensorlessTask(plan, chosen), ids
         collect = (float(goal.collect_x_m), float(goal.collect_y_m)) if goal.collect_others else None
-        task = Task(parts, ids.index(int(goal.part_id)), (float(goal.target.x), float(goal.target.y), theta),
-                    collect, device=self.device,
-                    position_tol_m=goal.position_tolerance_m or p["position_tolerance_m"],
-                    angle_tol_rad=goal.orientation_tolerance_rad or math.radians(p["orientation_tolerance_deg"]),
-                    timeout_s=goal.timeout_s or p["timeout_s"])
+        task = Task(parts, ids.index(int(goal.part_id)), target, collect, device=self.device,
+                    position_tol_m=position_tol, angle_tol_rad=angle_tol, timeout_s=goal.timeout_s or p["timeout_s"])
         return task, ids
 
     async def _execute(self, handle) -> MovePart.Result:
@@ -213,7 +230,9 @@ class FieldPlannerNode(PpodLifecycleNode):
         self.get_logger().info(f"MovePart: part {goal.part_id} to ({goal.target.x:.4f}, {goal.target.y:.4f}"
                                + (f", {math.degrees(goal.target.theta):.1f} deg)" if goal.use_orientation else ")")
                                + (f", others to ({goal.collect_x_m:.3f}, {goal.collect_y_m:.3f})"
-                                  if goal.collect_others else ""))
+                                  if goal.collect_others else "")
+                               + (f", sensorless: {task.plan.total_s:.1f} s open loop"
+                                  if isinstance(task, SensorlessTask) else ""))
         running = self.running
         success, reason = await running.done
         step = running.last_step
@@ -242,12 +261,22 @@ class FieldPlannerNode(PpodLifecycleNode):
     def _on_poses(self, msg: PartPoseArray) -> None:
         self._poses = msg
         run = self.running
-        if run is None:
+        if run is None or isinstance(run.task, SensorlessTask):
             return
+        self._step(run, stamp_to_seconds(msg.header.stamp))
+
+    def _on_sensorless_tick(self) -> None:
+        run = self.running
+        if run is not None and isinstance(run.task, SensorlessTask):
+            self._step(run, self._now())
+
+    def _step(self, run: _RunningTask, t_s: float) -> None:
+        """Step the running task at time ``t_s`` on the latest poses (rows in the task's part order)."""
         if run.handle.is_cancel_requested:
             self._finish(False, "cancelled")
             return
-        by_id = {int(p.id): p for p in msg.parts if p.status != PartPose.STATUS_LOST}
+        parts = self._poses.parts if self._poses is not None else []
+        by_id = {int(p.id): p for p in parts if p.status != PartPose.STATUS_LOST}
         poses = np.full((len(run.ids), 3), np.nan)
         for row, pid in enumerate(run.ids):
             p = by_id.get(pid)
@@ -255,7 +284,7 @@ class FieldPlannerNode(PpodLifecycleNode):
                 poses[row] = (p.pose.x, p.pose.y, p.pose.theta)
         t0 = time.perf_counter()
         try:
-            step = run.task.step(stamp_to_seconds(msg.header.stamp), poses)
+            step = run.task.step(t_s, poses)
         except PpodError as exc:
             self._finish(False, f"planning failed: {exc}")
             return

@@ -102,3 +102,48 @@ def test_move_part_brings_a_point_part_to_the_goal_over_tracked_poses(ros):
     assert res.position_error_m <= 1e-3
     assert goals, "the planner published plate-motion goals"
     assert {f.feedback.phase for f in feedback} & {"positioning", "holding", "done"}
+
+
+def test_a_sensorless_move_part_positions_a_part_no_camera_sees(ros):
+    from ppod_msgs.action import MovePart
+    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+    from rclpy.action import ActionClient
+    from rclpy.parameter import Parameter
+    from rosgraph_msgs.msg import Clock
+
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.convert import motion_from_msg, seconds_to_stamp
+    from ppod_nodes.field_planner import FieldPlannerNode
+    from ppod_ros.motion import PlateMotion
+    from ppod_ros.parts import PointPart
+    from ppod_ros.physics import PartDynamics
+
+    # Device time from /clock, as under `ppod up --sim`, stepped here as fast as the node keeps up.
+    _active(ros, ros.make(FieldPlannerNode, parameter_overrides=[Parameter("use_sim_time", value=True)]))
+    clock_pub = ros.node.create_publisher(Clock, "/clock", 10)
+    goals = ros.collect(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+    dyn = PartDynamics([PointPart(0.3)], np.array([[-0.05, 0.04, 0.0]]))
+    t = [0.0]
+    clock_pub.publish(Clock(clock=seconds_to_stamp(0.0)))
+    client = ActionClient(ros.node, MovePart, "/" + topics.MOVE_PART)
+    assert client.wait_for_server(timeout_sec=10)
+    goal = MovePart.Goal(part_id=3, sensorless=True)  # no tracker: no poses at all
+    goal.target.x, goal.target.y = 0.01, -0.015
+    feedback = []
+    handle = ros.wait_future(client.send_goal_async(goal, feedback_callback=feedback.append), 30, "goal")
+    assert handle.accepted
+    result = handle.get_result_async()
+    while not result.done() and t[0] < 60.0:
+        n = len(feedback)
+        motion = motion_from_msg(goals[-1]) if goals else PlateMotion.zero()
+        dyn.advance(motion, t[0], 0.1)
+        t[0] += 0.1
+        clock_pub.publish(Clock(clock=seconds_to_stamp(t[0])))
+        ros.wait_until(lambda n=n: len(feedback) > n or result.done(), 1.0)  # the node's timer stepped
+    assert result.done(), "the sensorless MovePart did not finish within 60 s of device time"
+    res = result.result().result
+    assert res.success, res.reason
+    assert "sensorless" in res.reason and math.isnan(res.position_error_m)  # nothing seen, nothing claimed
+    final = dyn.state.configurations[0]
+    assert math.hypot(final[0] - 0.01, final[1] + 0.015) <= 1e-3
+    assert len(goals) == 1 and {f.feedback.phase for f in feedback} == {"positioning", "done"}

@@ -132,11 +132,13 @@ class SimWorld:
 
     def _cycle(self, truth: CycleTruth) -> None:
         try:
-            self._advance_parts(truth)
+            self.advance_parts(truth)
         finally:
             self._cycles.task_done()
 
-    def _advance_parts(self, truth: CycleTruth) -> None:
+    def advance_parts(self, truth: CycleTruth) -> None:
+        """Advance the parts over one completed plate cycle (called per cycle by the physics thread;
+        benchmarks feed it cycles directly to time the parts physics alone)."""
         start, period = truth.start_time_s, 1.0 / truth.frequency_hz
         if self.fps > 0 and start >= self._next_tick_s - 1e-9:
             while self._next_tick_s <= start + 1e-9:

@@ -9,9 +9,10 @@ from ppod_ros.actuation.planning import GoalPlanner
 from ppod_ros.device import default_device_config
 from ppod_ros.errors import ConfigError
 from ppod_ros.parts import PointPart, published_rigid_part
-from ppod_ros.physics import PartDynamics, solve_field
+from ppod_ros.physics import solve_field
 from ppod_ros.planning import FieldSpec, Task, design_field
 from ppod_ros.planning.design import shift_centre
+from ppod_ros.planning.simulate import run_on_dynamics
 
 
 @pytest.mark.parametrize(("field_type", "params", "match"), [
@@ -89,24 +90,8 @@ def test_the_orienting_field_has_stable_orientation_theta_for_the_rigid_part():
 
 
 def _closed_loop(parts, start, goal, collect=None, horizon_s=40.0, seed=0):
-    rng = np.random.default_rng(seed)
-    dyn = PartDynamics(parts, np.array(start, dtype=float))
-    task = Task(parts, 0, goal, collect)
-    motion, t, step = None, 0.0, None
-    while t < horizon_s:
-        poses = dyn.state.configurations.copy()
-        poses[:, :2] += rng.normal(0, 5e-5, (len(parts), 2))  # tracker noise 0.05 mm, 0.1 deg
-        poses[:, 2] += rng.normal(0, math.radians(0.1), len(parts))
-        step = task.step(t, poses)
-        motion = step.motion or motion
-        if step.done or step.failed_reason:
-            break
-        if motion is not None:
-            state = dyn.advance(motion, t, 0.1)
-            for i in np.flatnonzero(state.status != 0):
-                dyn.set_part(int(i), state.configurations[i])  # a hop: lands at rest, as on the simulated device
-        t += 0.1
-    return step, dyn.state.configurations, t
+    run = run_on_dynamics(Task(parts, 0, goal, collect), parts, start, horizon_s=horizon_s, seed=seed)
+    return run.step, run.configurations, run.elapsed_s
 
 
 @pytest.mark.parametrize("start", [[0.06, 0.03], [-0.05, -0.04], [0.0, 0.065]])

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from ppod_ros.config.fields import Fields, load_yaml_file
 from ppod_ros.errors import ConfigError
@@ -225,47 +226,82 @@ def separate(xy: np.ndarray, v: np.ndarray, theta: np.ndarray, circles: list[np.
     gap_m : extra clearance kept between outlines.
     """
     xy = np.asarray(xy)
-    moved: set[int] = set()
-    idx = np.flatnonzero(active)
-    if idx.size < 2:
+    act = np.asarray(active, dtype=bool)
+    if int(act.sum()) < 2:
         return np.array([], dtype=int)
+    counts = np.array([len(cc) for cc in circles], dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    flat = np.concatenate([np.asarray(cc, dtype=float).reshape(-1, 3) for cc in circles])
     inv_mass = 1.0 / np.maximum(np.asarray(masses, dtype=float), 1e-9)
-    c, s = np.cos(theta), np.sin(theta)
+    moved = np.zeros(len(circles), dtype=np.bool_)
+    _separate_kernel(xy, v, np.asarray(theta, dtype=float), flat, offsets, inv_mass, act, float(gap_m),
+                     int(iterations), moved)
+    return np.flatnonzero(moved)
+
+
+@njit(cache=True)
+def _separate_kernel(xy, v, theta, flat, offsets, inv_mass, active, gap, iterations, moved):
+    """Compiled body of :func:`separate`: broad phase on bounding circles, then for each close pair
+    the deepest overlap of their circle covers, pushed apart along its normal."""
+    n = xy.shape[0]
+    reach = np.zeros(n)
+    for i in range(n):
+        for k in range(offsets[i], offsets[i + 1]):
+            reach[i] = max(reach[i], math.hypot(flat[k, 0], flat[k, 1]) + flat[k, 2])
+    world = np.zeros((flat.shape[0], 2))
     for _ in range(iterations):
+        for i in range(n):
+            c, s = math.cos(theta[i]), math.sin(theta[i])
+            for k in range(offsets[i], offsets[i + 1]):
+                world[k, 0] = xy[i, 0] + c * flat[k, 0] - s * flat[k, 1]
+                world[k, 1] = xy[i, 1] + s * flat[k, 0] + c * flat[k, 1]
         any_overlap = False
-        world = {}
-        for i in idx:
-            local = circles[i]
-            rot = np.column_stack([c[i] * local[:, 0] - s[i] * local[:, 1], s[i] * local[:, 0] + c[i] * local[:, 1]])
-            world[i] = (xy[i] + rot, local[:, 2])
-        for a_pos, a in enumerate(idx):
-            ca, ra = world[a]
-            for b in idx[a_pos + 1:]:
-                cb, rb = world[b]
-                d = cb[None, :, :] - ca[:, None, :]
-                dist = np.hypot(d[..., 0], d[..., 1])
-                depth = ra[:, None] + rb[None, :] + gap_m - dist
-                ia, ib = np.unravel_index(int(np.argmax(depth)), depth.shape)
-                if depth[ia, ib] <= 0:
+        for a in range(n):
+            if not active[a]:
+                continue
+            for b in range(a + 1, n):
+                if not active[b]:
+                    continue
+                if math.hypot(xy[b, 0] - xy[a, 0], xy[b, 1] - xy[a, 1]) >= reach[a] + reach[b] + gap:
+                    continue
+                best, bx, by, bd = 0.0, 0.0, 0.0, 0.0
+                for ka in range(offsets[a], offsets[a + 1]):
+                    for kb in range(offsets[b], offsets[b + 1]):
+                        dx = world[kb, 0] - world[ka, 0]
+                        dy = world[kb, 1] - world[ka, 1]
+                        dist = math.hypot(dx, dy)
+                        depth = flat[ka, 2] + flat[kb, 2] + gap - dist
+                        if depth > best:
+                            best, bx, by, bd = depth, dx, dy, dist
+                if best <= 0.0:
                     continue
                 any_overlap = True
-                dd = float(dist[ia, ib])
-                n = d[ia, ib] / dd if dd > 1e-12 else np.array([1.0, 0.0])
+                if bd > 1e-12:
+                    nx, ny = bx / bd, by / bd
+                else:
+                    nx, ny = 1.0, 0.0
                 wa = inv_mass[a] / (inv_mass[a] + inv_mass[b])
-                push = float(depth[ia, ib])
-                xy[a] -= wa * push * n
-                xy[b] += (1.0 - wa) * push * n
-                world[a] = (world[a][0] - wa * push * n, ra)
-                world[b] = (world[b][0] + (1.0 - wa) * push * n, rb)
-                ca = world[a][0]
-                rel = float(np.dot(v[b] - v[a], n))
-                if rel < 0:  # approaching: remove the normal component, shared like the push
-                    v[a] += wa * rel * n
-                    v[b] -= (1.0 - wa) * rel * n
-                moved.update((int(a), int(b)))
+                pa, pb = wa * best, (1.0 - wa) * best
+                xy[a, 0] -= pa * nx
+                xy[a, 1] -= pa * ny
+                xy[b, 0] += pb * nx
+                xy[b, 1] += pb * ny
+                for k in range(offsets[a], offsets[a + 1]):
+                    world[k, 0] -= pa * nx
+                    world[k, 1] -= pa * ny
+                for k in range(offsets[b], offsets[b + 1]):
+                    world[k, 0] += pb * nx
+                    world[k, 1] += pb * ny
+                rel = (v[b, 0] - v[a, 0]) * nx + (v[b, 1] - v[a, 1]) * ny
+                if rel < 0.0:  # approaching: remove the normal component, shared like the push
+                    v[a, 0] += wa * rel * nx
+                    v[a, 1] += wa * rel * ny
+                    v[b, 0] -= (1.0 - wa) * rel * nx
+                    v[b, 1] -= (1.0 - wa) * rel * ny
+                moved[a] = True
+                moved[b] = True
         if not any_overlap:
             break
-    return np.array(sorted(moved), dtype=int)
 
 
 __all__ = ["DENSITY_KG_M3", "Scene", "ScenePart", "circle_cover", "load_scene", "scene_from_dict", "separate"]

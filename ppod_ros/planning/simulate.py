@@ -28,6 +28,7 @@ class SimulatedRun:
     elapsed_s: float            # device time from the first step to the end
     hops: int                   # contact losses (parts put back at rest)
     motions: int                # motions the task asked for
+    trajectory: np.ndarray      # (T, N, 3) the true configurations at every step, then the final ones
 
 
 def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | RigidPart], starts, *,
@@ -39,7 +40,9 @@ def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | Rig
     dyn = PartDynamics(list(parts), np.array(starts, dtype=float))
     sensorless = isinstance(task, SensorlessTask)
     motion, t, step, hops, motions = None, 0.0, None, 0, 0
+    path = []
     while t < horizon_s + 1e-9:
+        path.append(dyn.state.configurations)
         poses = None
         if not sensorless:
             poses = dyn.state.configurations.copy()
@@ -56,7 +59,8 @@ def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | Rig
                 dyn.set_part(int(i), state.configurations[i])
                 hops += 1
         t += dt_s
-    return SimulatedRun(step, dyn.state.configurations, t, hops, motions)
+    final = dyn.state.configurations
+    return SimulatedRun(step, final, t, hops, motions, np.array(path + [final]))
 
 
 __all__ = ["SimulatedRun", "run_on_dynamics"]

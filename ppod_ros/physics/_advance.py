@@ -48,6 +48,9 @@ from ppod_ros.physics._layout import (
     PP_Y,
     RP_CANSTICK,
     RP_EPS,
+    RP_EVOLVE,
+    RP_X,
+    RP_Y,
     RP_ZTOL,
     S_ATOL_V,
     S_CAPTURE,
@@ -512,6 +515,21 @@ def advance(kind, mc, P, aux, t0, t1, y, h, period, A, B, C, E, E3, S, K, ytmp, 
             K[0, 1] = y[3]
             K[0, 2] = W[W_U + 0] - W[W_U + 5] * yy
             K[0, 3] = W[W_U + 1] + W[W_U + 5] * x
+        if kind == 1 and aux[AX_MODE] == STICK:
+            # A sticking rigid part moves exactly with the plate, like the point part above
+            # (event_value left the plate at t and the geometry at y in W). Integrating the plate's
+            # acceleration instead lets the twist drift off the plate's when the configuration
+            # evolves (the full dynamics: the convective term is not in the stick rhs); at the
+            # break-away the regularised law would then see a slip of many eps and answer with
+            # friction far beyond Coulomb's, and a spurious contact loss.
+            vx, vy, wz = plate_twist(y[0] if P[RP_EVOLVE] > 0.0 else P[RP_X],
+                                     y[1] if P[RP_EVOLVE] > 0.0 else P[RP_Y], W)
+            y[3] = vx
+            y[4] = vy
+            y[5] = wz
+            K[0, 0] = vx
+            K[0, 1] = vy
+            K[0, 2] = wz
         if kind == 0 and aux[AX_MODE] == SLIDE and _point_capture(P, aux, y, W, P[PP_KAPPA]):
             reuse = False
             stats[2] += 1

@@ -52,14 +52,15 @@ class CycleTruth:
     leg_peak_m: np.ndarray
     current_end_a: np.ndarray
 
-    def motion(self) -> PlateMotion:
-        """The plate's actual motion over this cycle as a PlateMotion (harmonics 1..H)."""
-        return PlateMotion.from_phasors(
-            self.frequency_hz,
-            np.arange(1, self.accel.shape[0] + 1),
-            self.accel,
-            name=f"cycle {self.cycle_index}",
-        )
+    def motion(self, absolute_time: bool = False) -> PlateMotion:
+        """The plate's actual motion over this cycle as a PlateMotion (harmonics 1..H), with phases
+        referred to the cycle's start, or with ``absolute_time`` to device time t = 0 (the same as
+        ``motion().time_shifted(-start_time_s)``, built once)."""
+        k = np.arange(1, self.accel.shape[0] + 1)
+        X = self.accel
+        if absolute_time:
+            X = X * np.exp(-1j * k[:, None] * (2.0 * np.pi * self.frequency_hz * self.start_time_s))
+        return PlateMotion.from_phasors(self.frequency_hz, k, X, name=f"cycle {self.cycle_index}")
 
 
 class TruthWriter:

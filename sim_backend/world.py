@@ -148,7 +148,7 @@ class SimWorld:
             if self.renderer is not None and self.camera_enabled.is_set():
                 self._queue_frame(truth)
         # The truth's phasors refer to this cycle's start; the dynamics wants absolute device time.
-        motion = truth.motion().time_shifted(-start)
+        motion = truth.motion(absolute_time=True)
         t0 = time.perf_counter()
         state = self.dynamics.advance(motion, start, period)
         hopped = np.flatnonzero(self.on_plate & (state.status != 0))
@@ -158,15 +158,15 @@ class SimWorld:
             log.warning("part %d (%s) lost contact (%s) at (%.3f, %.3f): put back on the plate at rest",
                         i, self.scene.parts[i].label, REASONS.get(int(state.status[i]), "?"),
                         *state.configurations[i, :2])
-            self.dynamics.set_part(int(i), state.configurations[i])
         if hopped.size:
+            self.dynamics.set_parts(hopped, state.configurations[hopped])
             state = self.dynamics.state
         xy, v = state.configurations[:, :2].copy(), state.twists[:, :2].copy()
         active = self.on_plate & ~state.contact_lost
         moved = separate(xy, v, state.configurations[:, 2], self.circles, self.masses, active, self.gap)
-        for i in moved:
-            self.dynamics.set_part(int(i), [xy[i, 0], xy[i, 1], state.configurations[i, 2]],
-                                   [v[i, 0], v[i, 1], state.twists[i, 2]])
+        if moved.size:
+            self.dynamics.set_parts(moved, np.column_stack([xy[moved], state.configurations[moved, 2]]),
+                                    np.column_stack([v[moved], state.twists[moved, 2]]))
         off = self.on_plate & (np.abs(xy).max(axis=1) > self.half_size)
         if np.any(off):
             for i in np.flatnonzero(off):

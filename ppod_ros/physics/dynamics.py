@@ -174,21 +174,32 @@ class PartDynamics:
 
     def set_part(self, index: int, configuration: Any, twist: Any = None) -> None:
         """Place part ``index`` at a configuration (and twist, default rest); clears its flags."""
-        if not 0 <= index < len(self.parts):
-            raise ConfigError(f"index: must be in 0..{len(self.parts) - 1}, got {index}")
-        cfg = _as_rows([configuration], 1, "configuration", "[x, y(, theta)]")[0]
-        tw = np.zeros(3) if twist is None else _as_rows([twist], 1, "twist", "[vx, vy(, thetadot)]")[0]
+        self.set_parts([index], [configuration], None if twist is None else [twist])
+
+    def set_parts(self, indices: Any, configurations: Any, twists: Any = None) -> None:
+        """:meth:`set_part` for several parts at once: ``configurations`` (M, 2 or 3), ``twists``
+        (M, 2 or 3) or None (rest)."""
+        idx = np.asarray(indices, dtype=np.int64).reshape(-1)
+        if idx.size == 0:
+            return
+        if (idx.min() < 0 or idx.max() >= len(self.parts)):
+            raise ConfigError(f"index: must be in 0..{len(self.parts) - 1}, got {idx.tolist()}")
+        cfg = _as_rows(configurations, idx.size, "configuration", "[x, y(, theta)]")
+        tw = np.zeros((idx.size, 3)) if twists is None else \
+            _as_rows(twists, idx.size, "twist", "[vx, vy(, thetadot)]")
         for g in self._groups:
-            hit = np.flatnonzero(g.index == index)
-            if hit.size:
-                j = int(hit[0])
-                g.Y[j, :g.dim] = cfg[:g.dim]
-                g.Y[j, g.dim:] = tw[:g.dim]
-                if g.kind == 0:
-                    g.theta[j] = cfg[2]
-                g.AUX[j] = 0.0
-                g.H[j] = 0.0
-                g.status[j] = lay.OK
+            rows = np.searchsorted(g.index, idx)
+            hit = (rows < g.index.size) & (g.index[np.minimum(rows, g.index.size - 1)] == idx)
+            if not hit.any():
+                continue
+            j, c, w = rows[hit], cfg[hit], tw[hit]
+            g.Y[j, :g.dim] = c[:, :g.dim]
+            g.Y[j, g.dim:] = w[:, :g.dim]
+            if g.kind == 0:
+                g.theta[j] = c[:, 2]
+            g.AUX[j] = 0.0
+            g.H[j] = 0.0
+            g.status[j] = lay.OK
 
     # ------------------------------------------------------------------ time stepping
     def advance(self, motion: PlateMotion, t_start_s: float, duration_s: float) -> DynamicsState:

@@ -124,3 +124,14 @@ def test_truth_is_expressed_in_the_tilted_plate_frame():
     second = analyze(accel[-STEPS_PER_CYCLE // EVERY :], 3)[1]
     expected = 10 * 100 / (2 * (2 * np.pi * 30) ** 2)  # |phi_y| |p''x| / 2
     assert abs(second[2]) == pytest.approx(expected, rel=0.5)
+
+
+def test_a_cycles_motion_in_absolute_time_is_the_time_shifted_one():
+    from ppod_sim.truth import CycleTruth
+
+    X = np.array([[1.0 + 2.0j, 0, 3.0j, 0, 0, 0.5], [0.2, 0.1j, 0, 0, 0, 0]])
+    z = np.zeros(6)
+    truth = CycleTruth(7, 0.23, 30.0, 0, 1.0, X, np.zeros((1, 6)), z, z, z, z)
+    t = np.linspace(0.0, 0.1, 17)
+    shifted = truth.motion().time_shifted(-truth.start_time_s)
+    assert np.allclose(truth.motion(absolute_time=True).acceleration(t), shifted.acceleration(t), atol=1e-12)

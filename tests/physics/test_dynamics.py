@@ -117,6 +117,22 @@ def test_a_rigid_part_that_sticks_and_breaks_away_keeps_contact_as_the_field_say
     assert rate == pytest.approx(field.velocity[0, 2], rel=0.1)
 
 
+def test_set_parts_places_several_parts_like_set_part_one_by_one(point_part, rigid_part):
+    parts = [point_part, rigid_part, point_part]
+    start = [[0.0, 0.0, 0.0], [0.02, 0.01, 0.3], [-0.02, 0.0, 0.0]]
+    one, many = PartDynamics(parts, start), PartDynamics(parts, start)
+    cfg = np.array([[0.03, -0.01, 0.5], [0.01, 0.02, 0.0]])
+    tw = np.array([[1e-3, 0.0, 0.2], [0.0, -2e-3, 0.0]])
+    for i, c, w in zip([1, 2], cfg, tw):
+        one.set_part(i, c, w)
+    many.set_parts([1, 2], cfg, tw)
+    a, b = one.state, many.state
+    assert np.array_equal(a.configurations, b.configurations) and np.array_equal(a.twists, b.twists)
+    assert np.allclose(b.configurations[1:], cfg) and np.allclose(b.twists[1], tw[0])
+    with pytest.raises(ConfigError, match="index"):
+        many.set_parts([3], cfg[:1])
+
+
 def test_bad_calls_are_clear_errors_naming_the_argument(point_part):
     m = suite_motion("LineSinkX")
     sim = PartDynamics([point_part], [[0.0, 0.0]])

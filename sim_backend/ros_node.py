@@ -196,7 +196,8 @@ class SimDeviceNode(Node):
         self.get_logger().info(f"simulated {w.device.time_s:.1f} s of device time; parts physics "
                                f"{w.physics_s:.2f} s; {w.frames_rendered} frames rendered, {w.frames_dropped} dropped; "
                                f"device clock at most {1e3 * w.process.pacer.max_lag_s:.0f} ms behind real time, "
-                               f"slipped {w.process.pacer.slipped_s:.2f} s in {w.process.pacer.slips} stalls")
+                               f"slipped {w.process.pacer.slipped_s:.2f} s in {w.process.pacer.slips} stalls; "
+                               f"waited {w.backpressure_s:.2f} s for the parts physics")
 
 
 main = make_main(SimDeviceNode)

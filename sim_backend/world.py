@@ -103,6 +103,12 @@ class SimWorld:
         self._cycles: queue.Queue = queue.Queue()
         self._physics_thread: threading.Thread | None = None
         self.device.cycle_callbacks.append(self._cycles.put)
+        # Back-pressure: the device waits while the parts lag more than max_backlog_cycles behind
+        # it (a heavy stretch of stick-slip, say), so poses, frames and the plate stay one world;
+        # the pacer then gives up the lag (the run is slower than real time, and says so).
+        self.max_backlog_cycles = 3
+        self.backpressure_s = 0.0
+        self.process.on_step.append(self._wait_for_parts)
 
     @property
     def url(self) -> str:
@@ -123,6 +129,14 @@ class SimWorld:
             if truth is None:
                 return
             self._cycle(truth)
+
+    def _wait_for_parts(self, _device) -> None:
+        if self._physics_thread is None or not self._physics_thread.is_alive():
+            return
+        t0 = time.monotonic()
+        while self._cycles.unfinished_tasks > self.max_backlog_cycles and time.monotonic() - t0 < 2.0:
+            time.sleep(0.001)
+        self.backpressure_s += time.monotonic() - t0
 
     def drain(self, timeout_s: float = 5.0) -> None:
         """Wait until the parts have caught up with every completed cycle."""

@@ -64,7 +64,7 @@ class Task:
     def __init__(self, parts: Sequence[PointPart | RigidPart], chosen: int, goal, collect=None, *, device=None,
                  position_tol_m: float = 1e-3, angle_tol_rad: float = math.radians(2.0), timeout_s: float = 60.0,
                  gain_per_s: float = 0.3, integral_per_s: float = 0.5, settle_s: float = 0.5,
-                 collect_radius_m: float = 0.04, lost_after_s: float = 2.0):
+                 collect_radius_m: float = 0.04, lost_after_s: float = 2.0, integral_zone_m: float = 0.01):
         if not parts:
             raise ConfigError("parts: expected at least one part")
         if not 0 <= int(chosen) < len(parts):
@@ -97,6 +97,7 @@ class Task:
         self.tol, self.angle_tol, self.timeout = float(position_tol_m), float(angle_tol_rad), float(timeout_s)
         self.gain, self.ki, self.settle = gain_per_s, integral_per_s, settle_s
         self.collect_radius, self.lost_after = collect_radius_m, lost_after_s
+        self.integral_zone_m = float(integral_zone_m)
         fp = getattr(self.parts[self.chosen], "footprint", None)
         sym = fp.symmetry_rad if fp is not None else 2 * math.pi
         self.symmetry = sym if sym > 0 else 2 * math.pi
@@ -107,6 +108,7 @@ class Task:
         self.held_since: float | None = None
         self.offset = np.zeros(2)  # integral action: where the sink's centre is moved
         self._applied_offset = np.zeros(2)
+        self._track: list[tuple[float, float, float]] = []  # (t, x, y) over the last second
         self._offset_changed_s = -math.inf
         self.phase = "positioning"
         self.current_key: tuple | None = None
@@ -160,8 +162,16 @@ class Task:
                 return self._end(dist, None, dist, ang, text=text)
         else:
             self.in_tol_since = None
-        # Integral action on the sink centre while positioning or holding (close to the goal only).
-        if dist < 0.01 and self.phase in ("positioning", "holding"):
+        # Integral action on the sink centre while positioning or holding: within 3 mm of the goal,
+        # or within integral_zone_m (10 mm) once the part has stalled (moved under 0.3 mm in the
+        # last second: parts crowding round the goal hold it off, which only the integral
+        # corrects). Integrating while the part is still approaching would wind up and overshoot.
+        self._track.append((t_s, me[0], me[1]))
+        while len(self._track) > 2 and t_s - self._track[1][0] >= 1.0:
+            self._track.pop(0)
+        moved = math.hypot(me[0] - self._track[0][1], me[1] - self._track[0][2])
+        stalled = t_s - self._track[0][0] >= 1.0 and moved < 3e-4
+        if self.phase in ("positioning", "holding") and (dist < 0.003 or (dist < self.integral_zone_m and stalled)):
             self.offset = np.clip(self.offset + self.ki * dt * err, -0.01, 0.01)
         phase = self._choose_phase(dist, ang, pos_ok, ang_ok, me)
         motion = self._motion_for(phase, me)

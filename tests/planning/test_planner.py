@@ -126,3 +126,18 @@ def test_a_task_fails_with_a_reason_when_the_part_is_lost_or_time_runs_out():
     slow.step(0.0, [[0.03, 0.0, 0.0]])
     late = slow.step(6.0, [[0.03, 0.0, 0.0]])
     assert late.failed_reason and "timeout" in late.failed_reason
+
+
+def test_the_integral_acts_near_the_goal_or_once_the_part_has_stalled_not_while_it_approaches():
+    moving = Task([PointPart(0.3)], 0, (0.0, 0.0, None))
+    for k in range(30):  # 5-8 mm out, approaching at 1 mm/s
+        moving.step(0.1 * k, [[0.008 - 0.001 * 0.1 * k, 0.0, 0.0]])
+    assert np.all(moving.offset == 0.0)
+    stalled = Task([PointPart(0.3)], 0, (0.0, 0.0, None))
+    for k in range(30):  # held 5 mm out (by crowding parts, say)
+        stalled.step(0.1 * k, [[0.005, 0.0, 0.0]])
+    assert stalled.offset[0] < -1e-4 and stalled.offset[1] == 0.0  # the sink's centre moves past the goal
+    near = Task([PointPart(0.3)], 0, (0.0, 0.0, None))
+    near.step(0.0, [[0.002, 0.0, 0.0]])
+    near.step(0.1, [[0.0019, 0.0, 0.0]])
+    assert near.offset[0] < 0.0

@@ -182,7 +182,7 @@ class PartDynamics:
         idx = np.asarray(indices, dtype=np.int64).reshape(-1)
         if idx.size == 0:
             return
-        if (idx.min() < 0 or idx.max() >= len(self.parts)):
+        if idx.min() < 0 or idx.max() >= len(self.parts):
             raise ConfigError(f"index: must be in 0..{len(self.parts) - 1}, got {idx.tolist()}")
         cfg = _as_rows(configurations, idx.size, "configuration", "[x, y(, theta)]")
         tw = np.zeros((idx.size, 3)) if twists is None else \

@@ -48,88 +48,170 @@ def suite_motions() -> list[Path]:
     return sorted(Path(str(resources.files("ppod_ros") / "data" / "motions")).glob("*.yaml"))
 
 
+class _Rig:
+    """A simulated device, the waveform generator's core and the feedback loop, in this process.
+
+    The device runs faster than real time on a virtual CAN bus; ``plant_learning`` False keeps the
+    feedback on the nominal model (every goal starts from zero correction).
+    """
+
+    scale = np.array([1, 1, 1, 0.1, 0.1, 0.1])  # angular axes in m/s^2 at L = 0.1 m (PHYSICS.md)
+
+    def __init__(self, seed: int, plant_learning: bool = True):
+        from ppod_ros.actuation.generator import WaveformGenerator
+        from ppod_ros.actuation.planning import GoalPlanner
+        from ppod_ros.can import DeviceLink, open_bus
+        from ppod_ros.control.learned_plant import PlantLearningSettings
+        from ppod_ros.control.online import FeedbackLoop
+        from ppod_ros.device import default_device_config
+        from ppod_sim.device import SimDevice
+
+        config = default_device_config().with_can(interface="virtual", channel=f"bench-fb-{next(_channels)}")
+        self.buses = [open_bus(config.can), open_bus(config.can)]
+        self.device = SimDevice(config, self.buses[0], seed=seed)
+        self.link = DeviceLink(self.buses[1], config)
+        self.gen = WaveformGenerator(self.link, GoalPlanner(config))
+        self.loop = FeedbackLoop(config, plant_learning=PlantLearningSettings(enabled=plant_learning))
+        self.summaries: list = []
+        self.link.on_summary.append(self.summaries.append)
+
+    def close(self) -> None:
+        for bus in self.buses:
+            bus.shutdown()
+
+    def advance(self, seconds: float) -> None:
+        device, link = self.device, self.link
+        end = device.time_s + seconds
+        while device.time_s < end - 1e-12:
+            link.heartbeat()
+            device.advance(0.05)
+            link.poll()
+
+    def true_error(self, goal) -> tuple[float, float]:
+        """(relative error of the true plate, its harmonics the goal lacks over those it has)."""
+        from ppod_ros.motion import acceleration_error
+
+        truth = self.device.last_truth().accel
+        g = goal.phasor_table(truth.shape[0])
+        in_goal = np.abs(g).sum(axis=1) > 0
+        extra = np.linalg.norm(truth[~in_goal] * self.scale) / np.linalg.norm(truth[in_goal] * self.scale)
+        return acceleration_error(g, truth)[1], float(extra)
+
+    def start(self, goal) -> None:
+        """Make ``goal`` the loop's goal and send its starting correction (stored or predicted)."""
+        self.loop.set_goal(goal, self.device.time_s)
+        self.summaries.clear()
+        initial = self.loop.initial_correction_a
+        if initial is not None:
+            self.gen.apply_correction(goal.key, self.loop.controller.k, initial, start=True)
+
+    def iterate(self, goal, until, max_device_s: float = 30.0):
+        """Run learning iterations until ``until(result)`` is true; yields each result with a step."""
+        start_s = self.device.time_s
+        while self.device.time_s - start_s < max_device_s:
+            self.advance(0.05)
+            for s in self.summaries:
+                res = self.loop.on_summary(s.k, s.phasors, goal.frequency_hz, s.samples_per_cycle,
+                                           self.device.time_s)
+                if res is None or res.step is None:
+                    continue
+                yield res
+                self.gen.apply_correction(goal.key, res.step.k, res.step.correction_a)
+                if until(res):
+                    self.summaries.clear()
+                    return
+            self.summaries.clear()
+
+
 def run_case(goal, seed: int, iterations: int) -> dict:
     """One goal on a fresh simulated device; the whole loop in this process, faster than real time."""
-    from ppod_ros.actuation.generator import WaveformGenerator
-    from ppod_ros.actuation.planning import GoalPlanner
-    from ppod_ros.can import DeviceLink, open_bus
-    from ppod_ros.control.online import FeedbackLoop
-    from ppod_ros.device import default_device_config
     from ppod_ros.motion import acceleration_error
-    from ppod_sim.device import SimDevice
 
-    config = default_device_config().with_can(interface="virtual", channel=f"bench-fb-{next(_channels)}")
-    buses = [open_bus(config.can), open_bus(config.can)]
+    rig = _Rig(seed)
     try:
-        device = SimDevice(config, buses[0], seed=seed)
-        link = DeviceLink(buses[1], config)
-        gen = WaveformGenerator(link, GoalPlanner(config))
-        loop = FeedbackLoop(config)
-        summaries: list = []
-        link.on_summary.append(summaries.append)
         base, scaled = goal, 1.0
-        out = gen.submit(goal)
+        out = rig.gen.submit(goal)
         while not out.accepted and out.limit == "limits.contact_margin_mps2" and scaled > 0.35:
             # Suite motions near contact loss are over the device's safety margin: run the largest
             # scaled copy the device accepts (same field shape), and say so.
             scaled = round(scaled - 0.05, 2)
             goal = base.scaled(scaled)
-            out = gen.submit(goal)
+            out = rig.gen.submit(goal)
         if not out.accepted:
             return {"motion": goal.name, "seed": seed, "rejected": out.reason}
-
-        def advance(seconds: float) -> None:
-            end = device.time_s + seconds
-            while device.time_s < end - 1e-12:
-                link.heartbeat()
-                device.advance(0.05)
-                link.poll()
-
-        scale = np.array([1, 1, 1, 0.1, 0.1, 0.1])  # angular axes in m/s^2 at L = 0.1 m (PHYSICS.md)
-
-        def true_error() -> tuple[float, float]:
-            """(relative error of the true plate, its harmonics the goal lacks over those it has)."""
-            truth = device.last_truth().accel
-            g = goal.phasor_table(truth.shape[0])
-            in_goal = np.abs(g).sum(axis=1) > 0
-            extra = np.linalg.norm(truth[~in_goal] * scale) / np.linalg.norm(truth[in_goal] * scale)
-            return acceleration_error(g, truth)[1], float(extra)
-
-        advance(max(goal.ramp_time_s or 0.5, 0.5) + 0.6)
-        open_loop = true_error()[0]
-        loop.set_goal(goal, device.time_s)
+        rig.advance(max(goal.ramp_time_s or 0.5, 0.5) + 0.6)
+        open_loop = rig.true_error(goal)[0]
+        rig.start(goal)
         t0 = time.perf_counter()
         errors, est_err, first_ok, err5 = [], [], None, None
-        start_s = device.time_s
-        while device.time_s - start_s < 30.0 and (loop.controller.iteration < iterations):
-            advance(0.05)
-            for s in summaries:
-                res = loop.on_summary(s.k, s.phasors, goal.frequency_hz, s.samples_per_cycle, device.time_s)
-                if res is None or res.step is None:
-                    continue
-                truth = device.last_truth().accel
-                K = res.estimate.phasors.shape[0]
-                T = np.zeros((K, 6), complex)
-                T[: min(K, truth.shape[0])] = truth[:K]
-                est_err.append(acceleration_error(T, res.estimate.phasors)[0]
-                               / acceleration_error(np.zeros((K, 6)), goal.phasor_table(K))[0])
-                step = res.step
-                errors.append(step.error_relative)
-                if first_ok is None and step.error_relative <= 0.01:
-                    first_ok = step.iteration
-                if step.iteration == 5:
-                    err5 = true_error()[0]
-                gen.apply_correction(goal.key, step.k, step.correction_a)
-            summaries.clear()
-        advance(0.7)
-        final, out_of_goal = true_error()
+        for res in rig.iterate(goal, lambda r: r.step.iteration >= iterations):
+            truth = rig.device.last_truth().accel
+            K = res.estimate.phasors.shape[0]
+            T = np.zeros((K, 6), complex)
+            T[: min(K, truth.shape[0])] = truth[:K]
+            est_err.append(acceleration_error(T, res.estimate.phasors)[0]
+                           / acceleration_error(np.zeros((K, 6)), goal.phasor_table(K))[0])
+            step = res.step
+            errors.append(step.error_relative)
+            if first_ok is None and step.error_relative <= 0.01:
+                first_ok = step.iteration
+            if step.iteration == 5:
+                err5 = rig.true_error(goal)[0]
+        rig.advance(0.7)
+        final, out_of_goal = rig.true_error(goal)
         return {"motion": goal.name, "seed": seed, "scale": scaled, "open_loop": open_loop, "iter_to_1pct": first_ok,
                 "err_at_5": err5 if err5 is not None else final, "final": final, "out_of_goal": out_of_goal,
                 "est_vs_truth_median": float(np.median(est_err)) if est_err else float("nan"),
-                "errors": errors, "device_s": device.time_s, "wall_s": time.perf_counter() - t0}
+                "errors": errors, "device_s": rig.device.time_s, "wall_s": time.perf_counter() - t0}
     finally:
-        for bus in buses:
-            bus.shutdown()
+        rig.close()
+
+
+def planner_sequence() -> list:
+    """The goals a MovePart sends one after another: sinks whose centre moves, rotations, a sink again.
+
+    Designed by the field planner (30 Hz, point part mu 0.3), as the field_planner node does.
+    """
+    from ppod_ros.planning.design import design_field, shift_centre
+    from ppod_ros.planning.specs import FieldSpec
+
+    sink = design_field(FieldSpec.from_request("sink", [0.02, -0.02, 0.3])).motion
+    rot = design_field(FieldSpec.from_request("rotation", [0.05, -0.04, -0.3])).motion
+    rot2 = design_field(FieldSpec.from_request("rotation", [0.045, -0.035, -0.3])).motion
+    return [rot, sink, rot2, shift_centre(sink, 0.0004, 0.0), shift_centre(sink, 0.0008, -0.0004),
+            design_field(FieldSpec.from_request("sink", [0.0, 0.0, 0.3])).motion,
+            shift_centre(sink, -0.0005, 0.0006)]
+
+
+def run_sequence(goals, seed: int, plant_learning: bool, iterations: int = 4) -> dict:
+    """Goals one after another on one device, ``iterations`` learning steps each (as the planner does).
+
+    Reported per goal: the true plate's error once the goal's ramp has settled and its starting
+    correction (predicted by the learned plant, or none) is applied, before any learning step
+    (``start``); after the first step (``after_1``); and the learning iterations to 1 %.
+    """
+    rig = _Rig(seed, plant_learning=plant_learning)
+    rows = []
+    try:
+        for goal in goals:
+            out = rig.gen.submit(goal)
+            if not out.accepted:
+                rows.append({"motion": goal.name, "rejected": out.reason})
+                continue
+            rig.start(goal)
+            rig.advance(max(goal.ramp_time_s or 0.5, 0.5) + 0.6)
+            rig.summaries.clear()  # taken during the ramp
+            row = {"motion": goal.name, "start": rig.true_error(goal)[0],
+                   "source": rig.loop.initial_source or "none", "iter_to_1pct": None}
+            for res in rig.iterate(goal, lambda r: r.step.iteration >= iterations):
+                if res.step.iteration == 1:
+                    row["after_1"] = float(res.step.error_relative)
+                if row["iter_to_1pct"] is None and res.step.error_relative <= 0.01:
+                    row["iter_to_1pct"] = res.step.iteration
+            rows.append(row)
+    finally:
+        rig.close()
+    return {"seed": seed, "plant_learning": plant_learning, "goals": rows}
 
 
 def run(args: argparse.Namespace) -> int:

@@ -2,9 +2,10 @@
 
 Lifecycle node (STYLE.md rule 9); the logic is ppod_ros.control.online.FeedbackLoop:
   configure  load the device description, open the CAN bus receive-only (this node never sends on
-             it), build the estimator, the plant and the correction store
+             it), build the estimator, the plant, the plant learner and the correction store
   activate   follow the generator's status; estimate from every accelerometer summary; while a goal
-             is ACTIVE, publish learning-control corrections
+             is ACTIVE, publish its starting correction (iteration 0: stored for the goal, or
+             predicted by the plant learned from earlier goals) and learning-control corrections
   deactivate stop estimating and correcting
   cleanup    close the bus
 
@@ -33,6 +34,7 @@ from ppod_nodes.common.params import Param
 from ppod_nodes.common.runner import make_main
 from ppod_ros.can import DeviceLink, open_bus_waiting
 from ppod_ros.control import CorrectionStore, LearningSettings
+from ppod_ros.control.learned_plant import PlantLearningSettings
 from ppod_ros.control.online import FeedbackLoop, LoopOutput, OnlineSettings
 from ppod_ros.device import load_device_config
 from ppod_ros.errors import ConfigError, PpodError
@@ -51,6 +53,11 @@ class AccelFeedbackNode(PpodLifecycleNode):
         Param("gain", 1.0, "learning gain", min_value=0.01, max_value=2.0),
         Param("tolerance", 0.01, "converged when error_relative <= this", min_value=1e-5, max_value=0.5),
         Param("cache_dir", "", "where learned corrections are kept per device and goal; empty: ~/.cache/ppod"),
+        Param("learn_plant", True, "learn the plant online and start each new goal from the correction it predicts"),
+        Param("plant_prior_weight_a2", 0.01, "ridge weight of the nominal plant in the learned one (A^2)",
+              min_value=1e-9),
+        Param("plant_forgetting", 0.95, "weight kept by earlier plant samples per new one", min_value=1e-3,
+              max_value=1.0),
     )
 
     def __init__(self, **kwargs):
@@ -76,7 +83,11 @@ class AccelFeedbackNode(PpodLifecycleNode):
                                   settle_s=params["settle_s"], control=params["control"])
         learning = LearningSettings.from_dict({"gain": params["gain"], "tolerance": params["tolerance"]})
         cache = Path(params["cache_dir"]).expanduser() if params["cache_dir"] else Path.home() / ".cache" / "ppod"
-        self.loop = FeedbackLoop(config, settings, learning, store=CorrectionStore(cache))
+        plant_learning = PlantLearningSettings(enabled=params["learn_plant"],
+                                               prior_weight_a2=params["plant_prior_weight_a2"],
+                                               forgetting=params["plant_forgetting"])
+        self.loop = FeedbackLoop(config, settings, learning, store=CorrectionStore(cache),
+                                 plant_learning=plant_learning)
         self.bus = open_bus_waiting(config.can, params["bus_wait_s"])
         self.link = DeviceLink(self.bus, config)
         self.link.on_summary.append(self._on_summary)
@@ -109,7 +120,10 @@ class AccelFeedbackNode(PpodLifecycleNode):
 
     # ------------------------------------------------------------------ goal tracking
     def _on_status(self, msg: PlateMotionStatus) -> None:
-        active = msg.state == PlateMotionStatus.STATE_ACTIVE and msg.active.harmonics
+        # A goal is taken up as soon as it starts ramping in, so that its starting correction joins
+        # the goal's own ramp instead of following it after the plate has run uncorrected.
+        ramping = msg.state == PlateMotionStatus.STATE_RAMPING
+        active = (ramping or msg.state == PlateMotionStatus.STATE_ACTIVE) and msg.active.harmonics
         try:
             motion = motion_from_msg(msg.active) if active else None
         except ConfigError as exc:
@@ -122,11 +136,13 @@ class AccelFeedbackNode(PpodLifecycleNode):
             if key == self._active_goal_key:
                 return
             self._active_goal_key = key
-            self.loop.set_goal(motion, self._now())
+            ramp_left = (1.0 - min(max(msg.ramp_progress, 0.0), 1.0)) if ramping else 0.0
+            self.loop.set_goal(motion, self._now(), ramp_left_fraction=ramp_left)
             initial = self.loop.initial_correction_a
+            source = {"stored": " from its stored correction",
+                      "predicted": " from the correction the learned plant predicts"}.get(self.loop.initial_source, "")
         if motion is not None:
-            self.get_logger().info(f"learning goal '{motion.name}'" + (" from its stored correction"
-                                                                       if initial is not None else ""))
+            self.get_logger().info(f"learning goal '{motion.name}'{source}")
             if initial is not None:
                 self._send_correction(motion.name, self.loop.controller.k, initial, 0)
 

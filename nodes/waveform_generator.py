@@ -180,7 +180,8 @@ class WaveformGeneratorNode(PpodLifecycleNode):
             return  # a correction for another (or a finished) goal is never applied
         k = np.asarray(msg.k, dtype=int)
         table = (np.asarray(msg.real_a) + 1j * np.asarray(msg.imag_a)).reshape(-1, 6) if k.size else np.zeros((0, 6))
-        out = self.gen.apply_correction(None, k, table, absolute=msg.absolute)
+        # Iteration 0 is the goal's starting correction (stored or predicted by the learned plant).
+        out = self.gen.apply_correction(None, k, table, absolute=msg.absolute, start=msg.iteration == 0)
         level = diag.OK if out.applied and not out.reason else diag.WARN
         self.diagnostics.set("correction", level, out.reason or "applied", iteration=msg.iteration,
                              applied=out.applied)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import shutil
 import sys
 import threading
 import time
@@ -119,7 +120,12 @@ class _Demo:
         wall0 = time.monotonic()
         with open(log_path, "w", encoding="utf-8") as log:
             out = _Tee(log, sys.stdout) if args.verbose else log
-            extra = {"sim_device": {"scene": str(self.scene_path), "mismatch": args.mismatch}}
+            # A fresh correction cache: corrections are learned per plant, and the simulated plant
+            # changes with --mismatch while the device name stays the same.
+            cache = args.out / "feedback_cache"
+            shutil.rmtree(cache, ignore_errors=True)
+            extra = {"sim_device": {"scene": str(self.scene_path), "mismatch": args.mismatch},
+                     "accel_feedback": {"cache_dir": str(cache)}}
             with Stack(load_launch_spec(), sim=True, out=out, extra_params=extra) as stack:
                 stack.start()
                 _say(f"stack up in {time.monotonic() - wall0:.1f} s: "

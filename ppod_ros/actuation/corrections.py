@@ -5,7 +5,8 @@ current phasors (A) per harmonic and actuator (DESIGN.md: only the waveform gene
 limits and applies them). :func:`correct_table` adds one to a plan's feed-forward table:
 
 1. each entry's step from the correction now applied is clipped to ``limits.correction_step_a``
-   (the magnitude is cut, the phase kept);
+   (the magnitude is cut, the phase kept), or to ``limits.start_correction_a`` for a goal's
+   starting correction;
 2. if the corrected table would exceed an actuator limit (peak current, I^2 R temperature,
    amplifier voltage), the step is scaled back by bisection until it does not (if the correction
    now applied no longer fits, e.g. carried over to a new goal, the whole correction is scaled);
@@ -51,6 +52,7 @@ def correct_table(
     requested: np.ndarray,
     previous: np.ndarray | None = None,
     k: np.ndarray | None = None,
+    step_cap_a: float | None = None,
 ) -> CorrectionResult:
     """Apply a feedback correction to a plan's table, clipped and limited (module docstring).
 
@@ -64,6 +66,9 @@ def correct_table(
         (default 1..Kc); every k must be a row of the plan's table.
     previous : complex array, shape (K, 6), optional
         The correction currently applied (``applied_a`` of the last result; default zero).
+    step_cap_a : float, optional
+        Largest step per entry (A); default ``limits.correction_step_a``. Never above
+        ``limits.start_correction_a``.
     """
     K = plan.currents_a.shape[0]
     req = np.asarray(requested, dtype=complex)
@@ -80,7 +85,8 @@ def correct_table(
     if prev.shape != (K, 6):
         raise ConfigError(f"previous: expected shape ({K}, 6), got {prev.shape}")
     step = target - prev
-    cap = planner.config.limits.correction_step_a
+    lim = planner.config.limits
+    cap = lim.correction_step_a if step_cap_a is None else min(float(step_cap_a), lim.start_correction_a)
     mag = np.abs(step)
     clipped = mag > cap
     step = np.where(clipped, step * cap / np.maximum(mag, 1e-300), step)

@@ -134,12 +134,16 @@ class WaveformGenerator:
 
     # ------------------------------------------------------------------ corrections
     def apply_correction(self, goal_key: bytes | None, k: np.ndarray, table_a: np.ndarray,
-                         absolute: bool = True) -> CorrectionOutcome:
+                         absolute: bool = True, start: bool = False) -> CorrectionOutcome:
         """Apply a correction (harmonics ``k``, (len(k), 6) complex amperes) to the active goal.
 
         ``goal_key`` (a ``PlateMotion.key``) must name the active goal (None: whatever is active), so a
         correction learned for another goal is never applied. ``absolute`` replaces the correction
-        table; otherwise ``table_a`` is added to it.
+        table; otherwise ``table_a`` is added to it. ``start`` marks the goal's starting correction
+        (learned for it before, or predicted by the feedback's learned plant): as the goal's first
+        correction its entries may reach ``limits.start_correction_a`` instead of one learning step
+        (``limits.correction_step_a``), and it is crossfaded over the goal's own ramp. Every current,
+        voltage and thermal limit applies as always.
         """
         with self._lock:
             act = self._active
@@ -154,16 +158,20 @@ class WaveformGenerator:
                 return CorrectionOutcome(False, f"correction must be (len(k), 6) with k in 1..{K}; got "
                                                 f"{table.shape} for k = {k.tolist()}")
             target = table if absolute else act.correction_a[k - 1] + table
+            first = start and not np.any(act.correction_a)
+            cap = self.config.limits.start_correction_a if first else None
             try:
-                result = self.planner.correct(act.plan, target, previous=act.correction_a, k=k)
+                result = self.planner.correct(act.plan, target, previous=act.correction_a, k=k, step_cap_a=cap)
             except (ConfigError, LimitError) as exc:
                 return CorrectionOutcome(False, str(exc))
-            seq = self.link.send_correction(act.plan, result)
+            ramp = max(act.plan.ramp_s, self.config.timing.min_ramp_s) if first else None
+            seq = self.link.send_correction(act.plan, result, ramp_s=ramp)
             act.seqs.add(seq)
             act.correction_a = result.applied_a
             notes = []
             if result.step_clipped:
-                notes.append(f"step clipped to limits.correction_step_a = {self.config.limits.correction_step_a:g} A")
+                name = "start_correction_a" if first else "correction_step_a"
+                notes.append(f"step clipped to limits.{name} = {getattr(self.config.limits, name):g} A")
             if result.limited_by:
                 notes.append(f"scaled by {result.scale:.3f} to stay within {result.limited_by}")
             return CorrectionOutcome(True, "; ".join(notes), result, seq)

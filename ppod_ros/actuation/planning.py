@@ -360,12 +360,13 @@ class GoalPlanner:
         requested: np.ndarray,
         previous: np.ndarray | None = None,
         k: np.ndarray | None = None,
+        step_cap_a: float | None = None,
     ) -> CorrectionResult:
         """Apply a feedback correction to a plan's table (see ppod_ros.actuation.corrections)."""
         # Imported here: the corrections module builds on this one.
         from ppod_ros.actuation.corrections import correct_table
 
-        return correct_table(self, plan, requested, previous, k)
+        return correct_table(self, plan, requested, previous, k, step_cap_a)
 
 
 __all__ = [

@@ -4,12 +4,15 @@
 while a goal is active, learning-control corrections:
 
 1. ``set_goal(motion, now_s)``: a new controller for the goal (plant from the nominal model or a
-   stored identification; feed-forward exactly as the waveform generator plans it; a learned
-   correction from the :class:`~ppod_ros.control.store.CorrectionStore` when this goal was learned
-   before). Measurements start after ``settle_s``.
+   stored identification, refined by the plant learned online, :mod:`~ppod_ros.control.learned_plant`;
+   feed-forward exactly as the waveform generator plans it). It starts from the correction learned
+   for this goal before (:class:`~ppod_ros.control.store.CorrectionStore`), else from the one the
+   learned plant predicts (``G^-1 goal - feedforward``), else from zero. Measurements start after
+   ``settle_s``.
 2. ``on_summary(k, phasors, samples_per_cycle, now_s)``: compensates each channel's AC coupling (a
    known sensor response), collects ``summaries_per_estimate`` summaries, estimates, and, if the
-   loop controls, updates the correction; then waits ``settle_s`` (the plate's suspension
+   loop controls, teaches the plant learner (the applied currents and what they gave) and updates
+   the correction; then waits ``settle_s`` (the plate's suspension
    transients after a table change) before measuring again.
 
 No bus access: the caller sends the corrections to the generator, which limits and applies them.
@@ -26,6 +29,7 @@ import numpy as np
 
 from ppod_ros.actuation.planning import GoalPlanner
 from ppod_ros.config.fields import Fields
+from ppod_ros.control.learned_plant import PlantLearner, PlantLearningSettings
 from ppod_ros.control.learning import DIVERGED, LearningController, LearningSettings
 from ppod_ros.control.limits import DeviceLimits
 from ppod_ros.control.plant import PlantModel
@@ -106,15 +110,19 @@ class FeedbackLoop:
     settings : OnlineSettings
     learning : LearningSettings
     plant_for : callable(motion, k) -> PlantModel, optional
-        Where the plant comes from (default: the nominal model at the goal's frequency).
+        The prior plant (default: the nominal model at the goal's frequency); the plant learned
+        online refines it where goals have excited it.
     store : CorrectionStore, optional
         Learned corrections per goal (kept on convergence, reused for the same goal).
+    plant_learning : PlantLearningSettings, optional
+        How the plant is learned online (default: on).
     """
 
     def __init__(self, config: DeviceConfig, settings: OnlineSettings | None = None,
                  learning: LearningSettings | None = None,
                  plant_for: Callable[[PlateMotion, np.ndarray], PlantModel] | None = None,
-                 store: CorrectionStore | None = None):
+                 store: CorrectionStore | None = None,
+                 plant_learning: PlantLearningSettings | None = None):
         self.config = config
         self.settings = settings or OnlineSettings()
         self.learning = learning or LearningSettings()
@@ -123,10 +131,16 @@ class FeedbackLoop:
                                         second_order_terms=self.settings.second_order_terms)
         self.limits = DeviceLimits(max_current_a=config.limits.coil_current_a,
                                    max_step_a=config.limits.correction_step_a)
+        # A goal's starting correction is bounded as the generator bounds it (limits.start_correction_a).
+        self.start_limits = DeviceLimits(max_current_a=config.limits.coil_current_a,
+                                         max_step_a=config.limits.start_correction_a)
         self.plant_for = plant_for or self._nominal_plant
         self.store = store
+        self.learner = PlantLearner(plant_learning)
         self.goal: PlateMotion | None = None
         self.controller: LearningController | None = None
+        #: Where the current controller's starting correction came from: "stored", "predicted" or "".
+        self.initial_source = ""
         self._resume_s = math.inf
         self._collect = _Collect()
 
@@ -134,23 +148,46 @@ class FeedbackLoop:
         return PlantModel.from_response(self.planner.plant.frequency_response, motion.frequency_hz, k)
 
     # ------------------------------------------------------------------ goals
-    def set_goal(self, motion: PlateMotion | None, now_s: float) -> None:
-        """Start learning ``motion`` (None: no goal; summaries are then only estimated)."""
+    def set_goal(self, motion: PlateMotion | None, now_s: float, ramp_left_fraction: float = 0.0) -> None:
+        """Start learning ``motion`` (None: no goal; summaries are then only estimated).
+
+        ``ramp_left_fraction`` (0..1) of the goal's ramp is still to come (a goal taken up as it starts
+        ramping in: 1); measuring resumes ``settle_s`` after the ramp ends.
+        """
         self.goal = motion
         self._collect = _Collect()
         self._resume_s = now_s + self.settings.settle_s
         self.controller = None
+        self.initial_source = ""
         if motion is None or motion.is_zero() or not self.settings.control:
             return
         plan = self.planner.plan(motion)
+        self._resume_s += min(max(ramp_left_fraction, 0.0), 1.0) * plan.ramp_s
         kc = max(self.learning.min_harmonics, int(motion.k.max()))
         k = np.arange(1, kc + 1)
         ff = np.zeros((kc, 6), complex)
         rows = min(kc, plan.currents_a.shape[0])
         ff[:rows] = plan.currents_a[:rows]
+        plant = self.learner.model(self.plant_for(motion, k))
         initial = None if self.store is None else self.store.initial_for(self.config.name, motion, k)
-        self.controller = LearningController(motion, self.plant_for(motion, k), self.limits, self.learning,
+        if initial is not None:
+            self.initial_source = "stored"
+        elif plant.source == "learned":
+            initial = self._predicted_correction(motion, plant, k, ff)
+            self.initial_source = "predicted" if initial is not None else ""
+        if initial is not None:
+            initial = self.start_limits.apply(np.zeros_like(initial), initial, ff)[0]
+        self.controller = LearningController(motion, plant, self.limits, self.learning,
                                              feedforward_a=ff, initial_correction_a=initial)
+
+    def _predicted_correction(self, motion: PlateMotion, plant: PlantModel, k: np.ndarray, ff: np.ndarray
+                              ) -> np.ndarray | None:
+        """``G^-1 goal - feedforward`` on the goal's harmonics, within the device limits (or None)."""
+        goal = motion.phasor_table(int(k.max()))
+        want = plant.solve(goal[k - 1], k) - ff
+        present = np.abs(goal[k - 1]).sum(axis=1) > 0
+        want[~present] = 0.0  # distortion at the other harmonics is not linear in the current there
+        return want if np.any(want) else None
 
     @property
     def initial_correction_a(self) -> np.ndarray | None:
@@ -186,7 +223,11 @@ class FeedbackLoop:
         estimate = self.estimator.from_summaries(k, stack, frequency_hz)
         out = LoopOutput(estimate, goal=self.goal)
         if self.controller is not None and self.controller.state != DIVERGED:
-            out.step = self.controller.update(estimate)
+            ctrl = self.controller
+            km = int(estimate.k.max())
+            self.learner.observe(self.goal.frequency_hz, self.goal.phasor_table(km), ctrl.k, ctrl.command_a,
+                                 estimate.table(km))
+            out.step = ctrl.update(estimate)
             if out.step.converged and self.store is not None:
                 self.store.save(self.config.name, self.goal, out.step.k, self.controller.correction_a)
                 out.stored = True

@@ -157,6 +157,7 @@ def _limits(f: Fields, plate_radius_m: float, ambient_c: float) -> Limits:
         excluded_bands_hz=_frozen(bands),
         max_harmonic=f.integer("max_harmonic", min_value=1, max_value=MAX_HARMONIC),
         correction_step_a=_positive(f, "correction_step_a", "A"),
+        start_correction_a=f.number("start_correction_a", 1.0, min_value=0.0, exclusive_min=True, unit="A"),
     )
     f.finish()
     return out

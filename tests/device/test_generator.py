@@ -90,6 +90,47 @@ def test_corrections_apply_only_to_the_active_goal_and_are_clipped(rig):
     assert not bad.applied and "k in 1.." in bad.reason
 
 
+def _table_ramps(config, frames) -> list[float]:
+    from ppod_ros.can.codec import TableHeader, decode
+    from ppod_ros.errors import ProtocolError
+
+    out = []
+    for msg in frames:
+        try:
+            rec = decode(msg, node_id=config.can.device_node_id, direction="to_device")
+        except ProtocolError:  # the device's own frames: not what this test looks at
+            continue
+        if isinstance(rec, TableHeader):
+            out.append(rec.ramp_s)
+    return out
+
+
+def test_a_goals_starting_correction_may_reach_its_own_limit_once_and_ramps_with_the_goal(rig):
+    config, device, link, gen, spy = rig
+    goal = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0], name="LineSinkX",
+                              ramp_time_s=0.4)
+    gen.submit(goal)
+    run(device, link, 0.05)
+    drain(spy)
+    k = np.array([1])
+    start = np.full((1, 6), 0.6 + 0.0j)  # over one learning step (0.2 A), within start_correction_a (1 A)
+    assert config.limits.correction_step_a < 0.6 < config.limits.start_correction_a
+    out = gen.apply_correction(goal.key, k, start, start=True)
+    assert out.applied and "clipped" not in out.reason
+    np.testing.assert_allclose(gen.applied_correction_a[0], start[0], atol=2e-3)
+    assert _table_ramps(config, drain(spy)) == [pytest.approx(0.4, abs=1e-3)]  # the goal's ramp, not 50 ms
+    # Only the first correction of a goal is a start: a second one is an ordinary, clipped learning step.
+    again = gen.apply_correction(goal.key, k, np.full((1, 6), 1.4 + 0.0j), start=True)
+    assert again.applied and "correction_step_a" in again.reason
+    assert np.abs(gen.applied_correction_a[0] - start[0]).max() <= config.limits.correction_step_a + 2e-3
+    assert _table_ramps(config, drain(spy)) == [pytest.approx(config.timing.min_ramp_s, abs=1e-3)]
+    # A start larger than its own limit is clipped to it, on the next goal.
+    gen.submit(LINESINKX)
+    big = gen.apply_correction(LINESINKX.key, k, np.full((1, 6), 3.0 + 0.0j), start=True)
+    assert big.applied and "start_correction_a" in big.reason
+    assert np.abs(gen.applied_correction_a[0]).max() <= config.limits.start_correction_a + 2e-3
+
+
 def test_stop_ramps_to_rest_and_estop_latches_until_reset(rig):
     _, device, link, gen, _ = rig
     gen.submit(LINESINKX)

@@ -232,6 +232,8 @@ class SimDevice:
             if self.state == DeviceState.ESTOP:
                 self.state = DeviceState.DISABLED
                 self.faults &= ~Fault.ESTOP
+        elif rec.command == Command.SUMMARY_HARMONICS:
+            self.telemetry.requested_harmonics = rec.harmonics
         elif rec.command == Command.CLEAR_FAULTS and self.state == DeviceState.FAULT:
             self.state = DeviceState.DISABLED
             self.faults &= ~(STOPPING_FAULTS | Fault.TABLE_REJECTED)

@@ -86,7 +86,7 @@ class TableReceiver:
         rows = np.flatnonzero(np.any(currents != 0, axis=1))
         if rows.size == 0:
             return True
-        if int(rows[-1] + 1) > min(lim.max_harmonic, MAX_HARMONIC):
+        if int(rows[-1] + 1) > min(lim.max_table_harmonic, MAX_HARMONIC):
             return False
         freqs = frequency_hz * (rows + 1)
         if np.any(freqs < lim.frequency_range_hz[0]) or np.any(freqs > lim.frequency_range_hz[1]):

@@ -80,6 +80,8 @@ class Telemetry:
         self.summary_harmonics = summary_harmonics
         self.raw_frame_rate_hz = raw_frame_rate_hz
         self.send = send
+        #: Harmonics the host asked the summaries to carry (CONTROL SUMMARY_HARMONICS).
+        self.requested_harmonics = 0
         self._group: _Group | None = None
         self._seq = 0
         self._capture: _Capture | None = None
@@ -89,8 +91,24 @@ class Telemetry:
     # ------------------------------------------------------------------ summaries
     def summary_harmonics_for(self, samples_per_cycle: int, table_top: int) -> int:
         return int(
-            min(max(self.summary_harmonics, table_top), MAX_TABLE_HARMONIC, samples_per_cycle // 2 - 1)
+            min(max(self.summary_harmonics, table_top, self.requested_harmonics), MAX_TABLE_HARMONIC,
+                samples_per_cycle // 2 - 1)
         )
+
+    def summary_plan(self, frequency_hz: float, samples_per_cycle: int, table_top: int) -> tuple[int, int]:
+        """(H, cycles per summary) within the frame budget (docs/can_protocol.md, "Bus load").
+
+        Summary frames per second never exceed ``(C summary_harmonics + 1) summary_max_rate_hz``:
+        more harmonics are averaged over more cycles, and where even 16 cycles would not do, the
+        summaries carry fewer harmonics (never fewer than ``summary_harmonics``).
+        """
+        C = self.n_channels
+        budget = (C * self.summary_harmonics + 1) * self.summary_max_rate_hz  # frames/s
+        H = self.summary_harmonics_for(samples_per_cycle, table_top)
+        fit = int(((MAX_SUMMARY_CYCLES * budget / frequency_hz) - 1) // C)
+        H = max(min(H, fit), min(self.summary_harmonics, H))
+        n = math.ceil(frequency_hz * (C * H + 1) / budget - 1e-9)
+        return H, min(MAX_SUMMARY_CYCLES, max(1, n))
 
     def end_of_cycle(
         self, cycle_index: int, samples: np.ndarray, frequency_hz: float, table_seq: int, table_top: int
@@ -102,7 +120,7 @@ class Telemetry:
         if self._capture is not None and self._capture.frames:
             self._group = None  # summaries pause while a raw capture is on the bus
             return
-        H = self.summary_harmonics_for(spc, table_top)
+        H, n = self.summary_plan(frequency_hz, spc, table_top)
         g = self._group
         if (
             g is None
@@ -111,7 +129,6 @@ class Telemetry:
             or g.harmonics != H
             or g.table_seq != table_seq
         ):
-            n = min(MAX_SUMMARY_CYCLES, max(1, math.ceil(frequency_hz / self.summary_max_rate_hz - 1e-9)))
             g = self._group = _Group(
                 cycle_index, n, H, spc, table_seq, frequency_hz, np.zeros((H, self.n_channels), complex)
             )

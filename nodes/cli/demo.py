@@ -43,10 +43,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--goal", nargs="+", type=float, default=[0.02, -0.02, 0.0], metavar="V",
                         help="goal X Y [THETA_DEG] in the plate frame (m, m, deg; default 0.02 -0.02 0); "
                              "no THETA: position only")
-    parser.add_argument("--mismatch", choices=["zero", "default"], default="zero",
-                        help="plant mismatch of the simulated device (default zero: the plate moves as the "
-                             "model says from the first cycle; 'default': up to ~20 %% off until the "
-                             "accelerometer feedback has learned each new motion, see the README)")
+    parser.add_argument("--mismatch", choices=["zero", "default"], default="default",
+                        help="plant mismatch of the simulated device: 'default', as configured (gain, phase, "
+                             "cross-coupling and third-harmonic errors that the accelerometer feedback "
+                             "learns), or 'zero' (the plate moves as the nominal model says)")
     parser.add_argument("--no-collect", action="store_true",
                         help="finish as soon as the chosen part is there (default: also wait, up to half the "
                              "timeout, until the others are gathered within 40 mm of the goal)")

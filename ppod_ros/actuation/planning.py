@@ -43,9 +43,23 @@ if TYPE_CHECKING:
 MIN_TABLE_HARMONICS = 3
 
 
-def table_size(top_harmonic: int, max_harmonic: int) -> int:
-    """Rows of the current table for a goal whose highest harmonic is ``top_harmonic``."""
-    return max(int(top_harmonic), min(MIN_TABLE_HARMONICS, int(max_harmonic)))
+def table_size(top_harmonic: int, max_harmonic: int, frequency_hz: float | None = None, limits=None) -> int:
+    """Rows of the current table for a goal whose highest harmonic is ``top_harmonic``.
+
+    At least 1..3 (DESIGN.md) and the goal's harmonics; with ``frequency_hz`` and the device
+    ``limits``, also up to the third-order distortion products ``3 top`` (a voice coil's odd
+    nonlinearity puts them there, and the feedback cancels them), as far as ``limits.max_table_harmonic``,
+    ``limits.frequency_range_hz`` and ``limits.excluded_bands_hz`` allow.
+    """
+    rows = max(int(top_harmonic), min(MIN_TABLE_HARMONICS, int(max_harmonic)))
+    if frequency_hz is None or limits is None:
+        return rows
+    for h in range(rows + 1, min(3 * int(top_harmonic), int(limits.max_table_harmonic)) + 1):
+        fh = h * frequency_hz
+        if fh > limits.frequency_range_hz[1] or any(lo <= fh <= hi for lo, hi in limits.excluded_bands_hz):
+            break
+        rows = h
+    return rows
 
 
 def plate_peaks(motion: PlateMotion) -> tuple[float, float]:
@@ -245,7 +259,7 @@ class GoalPlanner:
                 limit_value=lim.contact_margin_mps2,
                 requested=margin,
             )
-        kt = table_size(top, lim.max_harmonic)
+        kt = table_size(top, lim.max_harmonic, motion.frequency_hz, lim)
         legs = leg_trajectory(self.kinematics, active, kmax=2 * max(top, 1))
         stroke = float(np.max(legs.peak_m))
         if stroke > lim.leg_stroke_m:

@@ -36,24 +36,31 @@ class Estop(Record):
 
 @dataclass(frozen=True)
 class Control(Record):
+    """A device command; its u16 argument is the ramp (DISABLE) or the harmonic count (SUMMARY_HARMONICS)."""
+
     FN: ClassVar[Fn] = Fn.CONTROL
     LENGTH: ClassVar[int] = 3
     command: Command
     ramp_s: float = 0.0
+    harmonics: int = 0
 
     def _payload(self) -> bytes:
-        return struct.pack(
-            "<BH",
-            check_int(int(self.command), 1, 255, "command"),
-            scaled(self.ramp_s, RAMP_LSB_S, 0, 0xFFFF, "ramp_s"),
-        )
+        if self.command == Command.SUMMARY_HARMONICS:
+            arg = check_int(self.harmonics, 1, MAX_TABLE_HARMONIC, "harmonics")
+        else:
+            arg = scaled(self.ramp_s, RAMP_LSB_S, 0, 0xFFFF, "ramp_s")
+        return struct.pack("<BH", check_int(int(self.command), 1, 255, "command"), arg)
 
     @classmethod
     def _parse(cls, d: bytes) -> Control:
-        cmd, ramp = struct.unpack("<BH", d)
+        cmd, arg = struct.unpack("<BH", d)
         if cmd not in Command._value2member_map_:
             raise err("out of range", f"control command {cmd} is unknown")
-        return cls(Command(cmd), ramp * RAMP_LSB_S)
+        if cmd == Command.SUMMARY_HARMONICS:
+            if not 1 <= arg <= MAX_TABLE_HARMONIC:
+                raise err("out of range", f"summary harmonics {arg} outside 1..{MAX_TABLE_HARMONIC}")
+            return cls(Command(cmd), harmonics=arg)
+        return cls(Command(cmd), arg * RAMP_LSB_S)
 
 
 @dataclass(frozen=True)

@@ -203,8 +203,17 @@ class DeviceLink:
             self._send(msg)
         return seq
 
+    def request_summary_harmonics(self, harmonics: int) -> None:
+        """Ask the device to summarise harmonics 1..``harmonics`` (at least; within its frame budget)."""
+        self._send(Control(Command.SUMMARY_HARMONICS, harmonics=int(harmonics)).encode(self.node))
+
     def send_plan(self, plan) -> int:
-        """Send a :class:`~ppod_ros.actuation.planning.GoalPlan`'s table with its ramp; returns its seq."""
+        """Send a :class:`~ppod_ros.actuation.planning.GoalPlan`'s table with its ramp; returns its seq.
+
+        The device is first asked to summarise every harmonic of the table (its rows include the
+        third-order distortion products of the goal's harmonics), so the feedback can measure them.
+        """
+        self.request_summary_harmonics(plan.currents_a.shape[0])
         return self.send_table(plan.currents_a, plan.frequency_hz, plan.ramp_s)
 
     def send_correction(self, plan, result, ramp_s: float | None = None) -> int:

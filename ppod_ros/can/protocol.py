@@ -84,6 +84,7 @@ class Command(IntEnum):
     DISABLE = 2  # ramp to zero (payload ramp, at least the device minimum), then disabled
     RESET_ESTOP = 3  # leave the latched emergency stop (-> disabled)
     CLEAR_FAULTS = 4  # leave the fault state (-> disabled) once its causes are gone
+    SUMMARY_HARMONICS = 5  # payload: summaries carry harmonics 1..n at least (n 1..10), within the frame budget
 
 
 class Fault(IntFlag):

@@ -164,6 +164,10 @@ class LearningController:
         feed-forward plus correction.
     initial_correction_a : complex array_like, shape (Kc, 6), optional
         Start from a cached correction (default zero).
+    harmonics : int, optional
+        Control harmonics 1..harmonics (default: 1..max(min_harmonics, the goal's highest); the
+        feedback loop passes the rows of the generator's table, which include the third-order
+        distortion products of the goal's harmonics).
     """
 
     def __init__(
@@ -175,12 +179,19 @@ class LearningController:
         *,
         feedforward_a: np.ndarray | None = None,
         initial_correction_a: np.ndarray | None = None,
+        harmonics: int | None = None,
     ):
         if not isinstance(goal, PlateMotion):
             raise ConfigError(f"goal: expected a PlateMotion, got {type(goal).__name__}")
         self.settings = settings or LearningSettings()
         self.goal = goal
         self.k = controlled_harmonics(goal, self.settings.min_harmonics)
+        if harmonics is not None:
+            if int(harmonics) < int(goal.k.max(initial=1)):
+                raise ConfigError(f"harmonics: {harmonics} would leave out the goal's harmonic {int(goal.k.max())}")
+            self.k = np.arange(1, int(harmonics) + 1)
+        #: Controlled harmonics the last measurement lacked (not updated; the goal has none there).
+        self.unmeasured: list[int] = []
         self.plant = as_plant(plant, goal.frequency_hz, self.k)
         if not callable(limits):
             raise ConfigError("limits: expected DeviceLimits or a callable (previous, proposed, feedforward)")
@@ -251,6 +262,8 @@ class LearningController:
         L = self.settings.length_scale_m
         err, rel = acceleration_error(G, M, L)
         ogr = self._out_of_goal(M)
+        note = (f"harmonics {self.unmeasured} not measured (the device summarises fewer): not corrected"
+                if self.unmeasured else "")
         if self.state == DIVERGED:
             return self._step(M, G, err, rel, ogr, LimitReport(), "diverged earlier: no further updates")
         self.iteration += 1
@@ -272,7 +285,7 @@ class LearningController:
             self.state = STALLED
         else:
             self.state = RUNNING
-        return self._step(M, G, err, rel, ogr, report, "")
+        return self._step(M, G, err, rel, ogr, report, note)
 
     # ------------------------------------------------------------------ helpers
     def _measured(self, measured: PlateEstimate | np.ndarray) -> np.ndarray:
@@ -283,9 +296,12 @@ class LearningController:
                     f"{self.goal.frequency_hz:g} Hz"
                 )
             missing = sorted(set(self.k.tolist()) - set(measured.k.tolist()))
-            if missing:
-                raise ConfigError(f"measured: estimate lacks controlled harmonics {missing}")
-            return measured.table(int(measured.k.max()))
+            in_goal = [k for k in missing if k in set(self.goal.pruned().k.tolist())]
+            if in_goal:
+                raise ConfigError(f"measured: estimate lacks the goal's harmonics {in_goal}")
+            # Unmeasured distortion rows read as zero, the goal there: no error, no update.
+            self.unmeasured = missing
+            return measured.table(max(int(measured.k.max()), int(self.k.max())))
         M = np.asarray(measured, dtype=complex)
         if M.ndim != 2 or M.shape[1] != 6 or M.shape[0] < self.k.size or not np.all(np.isfinite(M)):
             raise ConfigError(

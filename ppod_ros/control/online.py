@@ -163,11 +163,11 @@ class FeedbackLoop:
             return
         plan = self.planner.plan(motion)
         self._resume_s += min(max(ramp_left_fraction, 0.0), 1.0) * plan.ramp_s
-        kc = max(self.learning.min_harmonics, int(motion.k.max()))
+        # Every row of the generator's table is controlled: the goal's harmonics, 1..3 and the
+        # third-order distortion products (GoalPlanner's table_size).
+        kc = plan.currents_a.shape[0]
         k = np.arange(1, kc + 1)
-        ff = np.zeros((kc, 6), complex)
-        rows = min(kc, plan.currents_a.shape[0])
-        ff[:rows] = plan.currents_a[:rows]
+        ff = plan.currents_a.copy()
         plant = self.learner.model(self.plant_for(motion, k))
         initial = None if self.store is None else self.store.initial_for(self.config.name, motion, k)
         if initial is not None:
@@ -178,7 +178,7 @@ class FeedbackLoop:
         if initial is not None:
             initial = self.start_limits.apply(np.zeros_like(initial), initial, ff)[0]
         self.controller = LearningController(motion, plant, self.limits, self.learning,
-                                             feedforward_a=ff, initial_correction_a=initial)
+                                             feedforward_a=ff, initial_correction_a=initial, harmonics=kc)
 
     def _predicted_correction(self, motion: PlateMotion, plant: PlantModel, k: np.ndarray, ff: np.ndarray
                               ) -> np.ndarray | None:

@@ -90,7 +90,9 @@ class Limits:
     ``contact_margin_mps2`` is the smallest allowed min(g + a_n) over the working disc of radius
     ``working_radius_m``; ``excluded_bands_hz`` (B, 2) are frequency bands (flexure resonances)
     that no harmonic of a goal may fall in; ``max_harmonic`` is the highest harmonic a goal may
-    use; ``correction_step_a`` bounds one feedback correction step per table entry;
+    use, ``max_table_harmonic`` (>= it) the highest row of a current table (the goal's harmonics and
+    the distortion products the feedback cancels); ``correction_step_a`` bounds one feedback
+    correction step per table entry;
     ``start_correction_a`` bounds a goal's starting correction per table entry (the one the feedback
     sends as the goal ramps in: learned for this goal before, or predicted by the learned plant).
     """
@@ -108,6 +110,7 @@ class Limits:
     max_harmonic: int
     correction_step_a: float
     start_correction_a: float = 1.0
+    max_table_harmonic: int = 10
 
 
 @dataclass(frozen=True)

@@ -150,6 +150,10 @@ class Task:
         ang_ok = ang is None or abs(ang) <= self.angle_tol
         others = [i for i in range(len(self.parts)) if i != self.chosen and np.all(np.isfinite(poses[i, :2]))]
         spread = max((float(np.hypot(*(poses[i, :2] - self.goal))) for i in others), default=0.0)
+        # Touching parts are not tracked (never guessed): say how many of the others the spread covers.
+        n_others = len(self.parts) - 1
+        seen = (f"others within {1e3 * spread:.0f} mm ({len(others)} of {n_others} seen)" if others
+                else f"none of the {n_others} others seen")
         if pos_ok and ang_ok:
             self.in_tol_since = t_s if self.in_tol_since is None else self.in_tol_since
             self.held_since = t_s if self.held_since is None else self.held_since
@@ -158,7 +162,7 @@ class Task:
             if t_s - self.in_tol_since >= self.settle and (gathered or collect_spent):
                 text = (f"done in {elapsed:.1f} s: {1e3 * dist:.2f} mm"
                         + ("" if ang is None else f", {math.degrees(abs(ang)):.2f} deg") + " from the goal"
-                        + (f"; others within {1e3 * spread:.0f} mm" if self.collect else ""))
+                        + (f"; {seen}" if self.collect else ""))
                 return self._end(dist, None, dist, ang, text=text)
         else:
             self.in_tol_since = None
@@ -177,7 +181,7 @@ class Task:
         motion = self._motion_for(phase, me)
         self.phase = phase
         text = (f"{phase}: {1e3 * dist:.2f} mm" + ("" if ang is None else f", {math.degrees(ang):+.1f} deg")
-                + " from the goal" + (f"; others within {1e3 * spread:.0f} mm" if self.collect and others else ""))
+                + " from the goal" + (f"; {seen}" if self.collect and others else ""))
         return TaskStep(motion, phase, False, None, dist, ang, text)
 
     def _choose_phase(self, dist: float, ang: float | None, pos_ok: bool, ang_ok: bool, me: np.ndarray) -> str:

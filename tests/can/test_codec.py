@@ -72,7 +72,8 @@ def ms(hi):
 
 RECORDS = st.one_of(
     st.builds(Estop, u8),
-    st.builds(Control, st.sampled_from(list(Command)), ms(0xFFFF)),
+    st.builds(Control, st.sampled_from([c for c in Command if c != Command.SUMMARY_HARMONICS]), ms(0xFFFF)),
+    st.builds(Control, st.just(Command.SUMMARY_HARMONICS), harmonics=st.integers(1, 10)),
     st.builds(Heartbeat, u8, st.integers(0, 15)),
     st.builds(
         TableHeader, u8, st.integers(0, 60), st.integers(1, 2**32 - 1).map(lambda v: v * 1e-6), ms(0xFFFF)
@@ -273,6 +274,7 @@ def test_truncated_frames_are_rejected(rec, cut):
         lambda: SummaryData(1, 16, 1, 0j),
         lambda: Heartbeat(1, 16),
         lambda: Control(Command.DISABLE, -1.0),
+        lambda: Control(Command.SUMMARY_HARMONICS, harmonics=11),
         lambda: RawData(0, 4096, (0.0, 0.0, 0.0)),
     ],
 )

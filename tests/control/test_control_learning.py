@@ -231,3 +231,21 @@ def test_noise_growing_below_the_tolerance_is_not_divergence():
     for err in (0.05, 0.06, 0.07, 0.08):  # the same growth above the tolerance is divergence
         step = ctrl.update(table * (1 + err))
     assert step.state == "diverged" and step.ramp_down
+
+
+def test_distortion_rows_the_device_does_not_summarise_are_left_alone_and_said():
+    from ppod_ros.estimation import PlateEstimate
+
+    goal = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0])
+    plant = PlantModel.from_response(nominal_response, 30.0, range(1, 7))
+    ctrl = LearningController(goal, plant, DeviceLimits(max_current_a=6.0, max_step_a=0.5), harmonics=6)
+    assert ctrl.k.tolist() == [1, 2, 3, 4, 5, 6]
+    measured = goal.phasor_table(3) * 0.9  # harmonics 1..3 only
+    est = PlateEstimate(30.0, np.arange(1, 4), measured, np.zeros((3, 6)), (), (), 0.0, np.zeros(0), np.zeros(0),
+                        1, 0.0, 3.0)
+    step = ctrl.update(est)
+    assert "harmonics [4, 5, 6] not measured" in step.message
+    assert not np.any(step.correction_a[3:]) and np.any(step.correction_a[0])
+    with pytest.raises(ConfigError, match="would leave out the goal's harmonic 2"):
+        LearningController(PlateMotion(30, [1, 2], np.ones((2, 6)), np.zeros((2, 6))), plant,
+                           DeviceLimits(max_current_a=6.0, max_step_a=0.5), harmonics=1)

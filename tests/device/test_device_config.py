@@ -75,6 +75,8 @@ def test_with_mismatch_zero_returns_an_exact_plant_config():
         (("limits", "excluded_bands_hz"), [[20.0, 10.0]], "limits.excluded_bands_hz: each band must be"),
         (("limits", "frequency_range_hz"), [50.0, 10.0], "limits.frequency_range_hz"),
         (("limits", "max_harmonic"), 11, "limits.max_harmonic: must be <= 10"),
+        (("limits", "max_table_harmonic"), 4, "limits.max_table_harmonic: must be >= max_harmonic"),
+        (("limits", "start_correction_a"), 0.0, "limits.start_correction_a: must be > 0"),
         (("sim", "mismatch", "gain"), 2.0, "sim.mismatch.gain: must be <= 0.9"),
         (("limits", "frequency_range_hz"), [5.0, 600.0], "would exceed their configured rate"),
     ],

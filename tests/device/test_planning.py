@@ -1,5 +1,6 @@
 """Goal planning: valid goals become tables; goals over a limit are rejected whole, naming it."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -40,6 +41,19 @@ def test_the_goals_ramp_time_is_used_but_never_below_the_device_minimum():
         PLANNER.plan(PlateMotion.single(30, [5, 0, 0, 0, 0, 0], ramp_time_s=0.0)).ramp_s
         == CFG.timing.min_ramp_s
     )
+
+
+def test_the_table_has_rows_for_the_goals_third_order_distortion_products_where_the_device_allows():
+    two = PlateMotion(30.0, [1, 2], [[10, 0, 0, 0, 100, 0], [2, 0, 0, 0, 0, 0]], np.zeros((2, 6)))
+    assert PLANNER.plan(two).currents_a.shape == (6, 6)  # 3 x 2
+    three = PlateMotion(30.0, [1, 3], [[10, 0, 0, 0, 100, 0], [2, 0, 0, 0, 0, 0]], np.zeros((2, 6)))
+    plan = PLANNER.plan(three)
+    assert plan.currents_a.shape == (9, 6) and not np.any(plan.currents_a[3:])  # zero rows cost no frames
+    # At 100 Hz harmonic 5 is the last within limits.frequency_range_hz (400 Hz): rows stop there.
+    assert PLANNER.plan(PlateMotion(100.0, [1, 2], [[5, 0, 0, 0, 0, 0], [1, 0, 0, 0, 0, 0]],
+                                    np.zeros((2, 6)))).currents_a.shape == (4, 6)
+    narrow = dataclasses.replace(CFG, limits=dataclasses.replace(CFG.limits, max_table_harmonic=5))
+    assert GoalPlanner(narrow).plan(three).currents_a.shape == (5, 6)
 
 
 def test_a_zero_motion_plans_a_zero_table():

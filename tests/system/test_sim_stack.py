@@ -61,7 +61,9 @@ def test_linesinkx_on_the_plant_without_mismatch_is_within_one_percent(tmp_path)
         goal = _send_goal(ros)
         assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_ACTIVE for s in status), 15)
         n = len(truth)
-        assert ros.wait_until(lambda: len(truth) >= n + 10, 15)  # a second of steady state
+        # A second of steady state, after a second's margin: under load the simulator's truth can
+        # arrive late, so the first messages after ACTIVE may still be from the ramp.
+        assert ros.wait_until(lambda: len(truth) >= n + 20, 20)
         errors = [_truth_error(m, goal) for m in truth[-10:]]
     assert max(errors) <= 0.01, (errors, _device_story(tmp_path))
 

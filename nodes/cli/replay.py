@@ -116,6 +116,7 @@ def _replay(plan, args) -> tuple[dict, float]:
     got: dict[str, list] = {t: [] for t in COMPARED}
     clock: list[float] = [0.0]
     log_dir = args.log_dir or tmp
+    log_dir.mkdir(parents=True, exist_ok=True)
     with open(log_dir / "replay_stack.log", "w") as log, Stack(spec, sim=True, out=log, log_dir=args.log_dir,
                                                                extra_params=extra, handle_signals=False) as stack:
         try:

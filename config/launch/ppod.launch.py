@@ -37,6 +37,8 @@ def _nodes(context):
             f.write(params_file_text(node.name, params))
         cmd = [sys.executable, "-m", node.module, *node.args, "--ros-args", "-r", f"__node:={node.name}",
                "--params-file", path]
+        if node.nice:
+            cmd = ["nice", "-n", str(node.nice), *cmd]  # as ppod up: the simulator yields to the host nodes
         actions.append(ExecuteProcess(cmd=cmd, name=node.name, output="screen", sigterm_timeout="10",
                                       sigkill_timeout="5"))
     return actions

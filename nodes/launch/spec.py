@@ -46,6 +46,9 @@ class NodeSpec:
     required: bool = True
     args: tuple[str, ...] = ()
     ready: str = ""
+    #: Niceness added to the child process (0..19): a simulated device yields the CPU to the host's
+    #: nodes, since a starved simulator only slows its own clock while a starved host misses heartbeats.
+    nice: int = 0
 
     def enabled(self, sim: bool) -> bool:
         return self.when == "always" or (self.when == "sim") == sim
@@ -135,6 +138,7 @@ def launch_spec_from_dict(data: dict[str, Any], origin: str = "launch config") -
             required=item.boolean("required", True),
             args=tuple(args),
             ready=item.string("ready", ""),
+            nice=item.integer("nice", 0, min_value=0, max_value=19),
         )
         if spec.ready:
             try:

@@ -37,6 +37,17 @@ def _die_with_parent() -> None:
     libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
+def _child_setup(nice: int):
+    """What the child does before exec: die with the parent, lower its priority by ``nice``."""
+
+    def setup() -> None:
+        _die_with_parent()
+        if nice:
+            os.nice(nice)
+
+    return setup
+
+
 def describe_exit(code: int | None) -> str:
     if code is None:
         return "still running"
@@ -116,13 +127,14 @@ class Supervisor:
                "--params-file", str(params_file)]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                 text=True, bufsize=1, env=self.env, start_new_session=True,
-                                preexec_fn=_die_with_parent)
+                                preexec_fn=_child_setup(spec.nice))
         child = Child(spec, proc, params_file)
         child.reader = threading.Thread(target=self._forward, args=(child, len(self.children)), daemon=True,
                                         name=f"log-{spec.name}")
         child.reader.start()
         self.children.append(child)
-        self.say(f"started {spec.name} (pid {proc.pid}): python -m {spec.module}")
+        self.say(f"started {spec.name} (pid {proc.pid}): python -m {spec.module}"
+                 + (f" (nice {spec.nice})" if spec.nice else ""))
         return child
 
     # ------------------------------------------------------------------ watch

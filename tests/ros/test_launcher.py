@@ -82,3 +82,29 @@ def test_bad_launch_config_is_one_clear_error(tmp_path):
     proc = ppod("up", "--config", str(cfg))
     assert proc.wait(30) == 2
     assert "nodes[0].colour" in proc.output
+
+
+def test_a_node_started_with_nice_runs_at_that_lower_priority(tmp_path):
+    import io
+    import os
+
+    from ppod_nodes.launch.spec import NodeSpec
+    from ppod_nodes.launch.supervisor import Supervisor
+
+    sup = Supervisor(dict(os.environ), sim=True, out=io.StringIO())
+    try:
+        plain = sup.start(NodeSpec("plain", "tests.support.sleeper", lifecycle=False))
+        lowered = sup.start(NodeSpec("lowered", "tests.support.sleeper", lifecycle=False, nice=5))
+        assert os.getpriority(os.PRIO_PROCESS, lowered.process.pid) == os.getpriority(os.PRIO_PROCESS, 0) + 5
+        assert os.getpriority(os.PRIO_PROCESS, plain.process.pid) == os.getpriority(os.PRIO_PROCESS, 0)
+    finally:
+        assert sup.stop_all(10)
+        sup.close()
+
+
+def test_nice_outside_0_to_19_is_one_clear_error(tmp_path):
+    from ppod_nodes.launch.spec import launch_spec_from_dict
+    from ppod_ros.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"nodes\[0\].nice"):
+        launch_spec_from_dict({"nodes": [{"name": "a", "module": "x", "nice": 25}]})

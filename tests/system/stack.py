@@ -10,7 +10,7 @@ import yaml
 from ppod_nodes.launch.spec import launch_spec_from_dict
 from ppod_nodes.launch.stack import Stack
 
-SIM = {"name": "sim_device", "module": "ppod_sim.ros_node", "lifecycle": False, "when": "sim",
+SIM = {"name": "sim_device", "module": "ppod_sim.ros_node", "lifecycle": False, "when": "sim", "nice": 5,
        "ready": "CAN bridge on", "params": {"port": "{sim_port}", "camera": False, "mismatch": "default"}}
 GENERATOR = {"name": "waveform_generator", "module": "ppod_nodes.waveform_generator",
              "sim_params": {"can_interface": "remote", "can_channel": "ws://127.0.0.1:{sim_port}/",

@@ -141,7 +141,10 @@ class AccelFeedbackNode(PpodLifecycleNode):
             initial = self.loop.initial_correction_a
             source = {"stored": " from its stored correction",
                       "predicted": " from the correction the learned plant predicts"}.get(self.loop.initial_source, "")
+            fallback = self.loop.learner.last_fallback
         if motion is not None:
+            if fallback:
+                self.get_logger().warn(f"learned plant: {fallback}")
             self.get_logger().info(f"learning goal '{motion.name}'{source}")
             if initial is not None:
                 self._send_correction(motion.name, self.loop.controller.k, initial, 0)

@@ -2,10 +2,11 @@
 
 * Harmonic summaries (live, low load): the device computes each cycle's phasors of every channel
   at harmonics 1..H from the cycle's N samples (``X_k = (2i/N) sum_n y_n e^{-i k 2 pi n / N}``,
-  sample n at ``n T / N`` after the cycle start), averages ``n_cycles = ceil(f / summary_max_rate_hz)``
-  consecutive cycles and sends one SUMMARY_HEADER (first cycle index, cycle count, samples per
-  cycle, table sequence) and C x H SUMMARY_DATA frames. H = max(can.summary_harmonics, the
-  active table's top harmonic), below N / 2.
+  sample n at ``n T / N`` after the cycle start), averages ``n_cycles`` consecutive cycles and
+  sends one SUMMARY_HEADER (first cycle index, cycle count, samples per cycle, table sequence) and
+  C x H SUMMARY_DATA frames. H = max(can.summary_harmonics, the active table's top harmonic, the
+  harmonics the host asked for with CONTROL SUMMARY_HARMONICS), at most 10 and below N / 2;
+  ``n_cycles`` keeps the summary frames within their budget (:meth:`Telemetry.summary_plan`).
 * Raw captures (bounded): on RAW_REQUEST the device records the masked channels over the next
   n whole cycles (at most 4096 samples per channel), then sends RAW_HEADER and the samples,
   three per frame, paced at ``can.raw_frame_rate_hz``. Summaries pause while a capture is sent, so

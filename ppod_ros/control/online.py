@@ -182,7 +182,7 @@ class FeedbackLoop:
 
     def _predicted_correction(self, motion: PlateMotion, plant: PlantModel, k: np.ndarray, ff: np.ndarray
                               ) -> np.ndarray | None:
-        """``G^-1 goal - feedforward`` on the goal's harmonics, within the device limits (or None)."""
+        """``G^-1 goal - feedforward`` on the goal's harmonics (None if zero); the caller limits it."""
         goal = motion.phasor_table(int(k.max()))
         want = plant.solve(goal[k - 1], k) - ff
         present = np.abs(goal[k - 1]).sum(axis=1) > 0

@@ -6,7 +6,7 @@ simulated device at its default mismatch, the whole loop in this process (benchm
 
 import pytest
 
-from benchmarks.feedback import planner_sequence, run_sequence
+from ppod_bench.feedback import planner_sequence, run_sequence
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +34,7 @@ def test_without_it_every_new_goal_starts_as_far_off_as_the_mismatch_makes_it(go
 def test_distortion_at_three_times_each_goal_harmonic_is_cancelled(name):
     # The simulated coils add 3 % of each harmonic k at 3k: harmonic 6 for TwoHarmonicX, 9 for
     # Swirl3H, beyond 1..3. The table and the summaries reach them, so the loop cancels them too.
-    from benchmarks.feedback import run_case, suite_motions
+    from ppod_bench.feedback import run_case, suite_motions
     from ppod_ros.motion import PlateMotion
 
     (path,) = [p for p in suite_motions() if p.stem == name]

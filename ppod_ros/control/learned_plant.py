@@ -190,9 +190,5 @@ class PlantLearner:
         self.last_fallback = "; ".join(notes)
         return model
 
-    def forget(self) -> None:
-        """Drop everything learned (after a plant change the loop could not follow)."""
-        self._stats.clear()
-
 
 __all__ = ["PlantLearner", "PlantLearningSettings"]

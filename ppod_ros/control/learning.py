@@ -302,6 +302,7 @@ class LearningController:
             # Unmeasured distortion rows read as zero, the goal there: no error, no update.
             self.unmeasured = missing
             return measured.table(max(int(measured.k.max()), int(self.k.max())))
+        self.unmeasured = []
         M = np.asarray(measured, dtype=complex)
         if M.ndim != 2 or M.shape[1] != 6 or M.shape[0] < self.k.size or not np.all(np.isfinite(M)):
             raise ConfigError(

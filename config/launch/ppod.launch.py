@@ -3,44 +3,49 @@
     ros2 launch config/launch/ppod.launch.py sim:=true
     ros2 launch config/launch/ppod.launch.py config:=/path/to/ppod_up.yaml
 
-It reads the same launch configuration as ``ppod up`` (nodes/data/ppod_up.yaml by default), so the
-two never disagree, and starts each node as ``python -m MODULE`` with its parameters; lifecycle nodes
-get ``autostart:=true`` and bring themselves to active. On machines with ROS from PyPI wheels (no
-``launch`` package) use ``ppod up`` instead.
+A thin wrapper: :func:`ppod_nodes.launch.ros_launch.launch_entries` reads the same launch
+configuration as ``ppod up`` (nodes/data/ppod_up.yaml by default), fills in every placeholder the
+same way and writes each node's parameter file; here each entry becomes a managed ``LifecycleNode``
+(or a plain ``Node`` for the simulated device) running the node's console script, e.g.
+``ppod-waveform-generator``. Lifecycle nodes get ``autostart: true`` and bring themselves to active.
+On machines with ROS from PyPI wheels (no ``launch`` package) use ``ppod up`` instead.
 """
 
 import os
-import sys
-import tempfile
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction, SetEnvironmentVariable
+from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
 from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import LifecycleNode, Node
 
-from ppod_nodes.common.params import params_file_text
+from ppod_nodes.launch.ros_launch import ROS_PACKAGE, launch_entries
 from ppod_nodes.launch.spec import load_launch_spec
+
+
+def _package_or_none():
+    """ros2 run's package when installed in an ament workspace; else the scripts are on PATH."""
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+    except ImportError:
+        return None
+    try:
+        get_package_prefix(ROS_PACKAGE)
+    except (PackageNotFoundError, OSError):  # OSError: no AMENT_PREFIX_PATH (no sourced workspace)
+        return None
+    return ROS_PACKAGE
 
 
 def _nodes(context):
     config = LaunchConfiguration("config").perform(context) or None
     sim = LaunchConfiguration("sim").perform(context).lower() in ("1", "true", "yes")
     spec = load_launch_spec(config)
-    tmp = tempfile.mkdtemp(prefix="ppod-launch-")
+    package = _package_or_none()
     actions = [SetEnvironmentVariable("ROS_AUTOMATIC_DISCOVERY_RANGE",
                                       os.environ.get("PPOD_DISCOVERY_RANGE", spec.discovery_range))]
-    for node in spec.selected(sim):
-        params = node.parameters(sim)
-        if node.lifecycle:
-            params = {**params, "autostart": True}
-        path = os.path.join(tmp, f"{node.name}.yaml")
-        with open(path, "w") as f:
-            f.write(params_file_text(node.name, params))
-        cmd = [sys.executable, "-m", node.module, *node.args, "--ros-args", "-r", f"__node:={node.name}",
-               "--params-file", path]
-        if node.nice:
-            cmd = ["nice", "-n", str(node.nice), *cmd]  # as ppod up: the simulator yields to the host nodes
-        actions.append(ExecuteProcess(cmd=cmd, name=node.name, output="screen", sigterm_timeout="10",
-                                      sigkill_timeout="5"))
+    for entry in launch_entries(sim=sim, spec=spec):
+        kind = LifecycleNode if entry.lifecycle else Node
+        actions.append(kind(package=package, executable=entry.executable, name=entry.name, namespace="",
+                            parameters=[entry.params_file], output="screen", prefix=entry.prefix or None))
     return actions
 
 

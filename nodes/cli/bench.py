@@ -35,7 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--list", action="store_true", help="list the available benchmarks")
     sub = parser.add_subparsers(dest="bench", metavar="NAME")
     for name, module in sorted(_benchmarks().items()):
-        p = sub.add_parser(name, help=getattr(module, "HELP", ""), description=module.__doc__,
+        # argparse %-formats help strings: a literal '%' (as in "iterations to 1 %") must be doubled.
+        p = sub.add_parser(name, help=getattr(module, "HELP", "").replace("%", "%%"), description=module.__doc__,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         p.add_argument("--out", default="out/bench", help="folder for plots and tables (default: %(default)s)")
         module.add_arguments(p)

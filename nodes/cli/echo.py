@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     import yaml
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-    from ppod_nodes.common.msgdict import to_data, type_from_name
+    from ppod_nodes.common.msgdict import type_from_name
     from ppod_nodes.common.session import RosSession
 
     if not args.list and not args.topic:
@@ -74,19 +74,21 @@ def run(args: argparse.Namespace) -> int:
         seen = [0]
         lock = threading.Lock()
 
+        failure: list[str] = []
+
         def on_msg(msg):
-            data = to_data(msg)
-            if args.field:
-                for part in args.field.split("."):
-                    data = data[int(part)] if isinstance(data, list) else data[part]
+            # Runs in the session's executor thread: an exception here would only kill that thread
+            # and leave us waiting forever, so any failure is recorded and ends the wait (exit 1).
+            try:
+                text = _render(msg, args.field, yaml)
+            except Exception as exc:  # noqa: BLE001 - reported as one line, then exit 1
+                failure.append(f"{type(exc).__name__}: {exc}")
+                done.set()
+                return
             with lock:
                 if done.is_set():
                     return
-                if isinstance(data, (dict, list)):
-                    sys.stdout.write(yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=110))
-                    sys.stdout.write("---\n")
-                else:
-                    sys.stdout.write(f"{data}\n")
+                sys.stdout.write(text)
                 sys.stdout.flush()
                 seen[0] += 1
                 if limit and seen[0] >= limit:
@@ -97,9 +99,25 @@ def run(args: argparse.Namespace) -> int:
             finished = done.wait(args.timeout if args.timeout > 0 else None)
         except KeyboardInterrupt:
             return 0
+        if failure:
+            print(f"ppod echo: cannot print a message of {topic}: {failure[0]}", file=sys.stderr)
+            return 1
         if not finished:
             print(f"ppod echo: {seen[0]} message(s) on {topic} within {args.timeout:g} s", file=sys.stderr)
             return 1
         return 0
     finally:
         session.close()
+
+
+def _render(msg, field: str | None, yaml) -> str:
+    """One message as YAML (a document ending in ``---``), or one field's scalar value."""
+    from ppod_nodes.common.msgdict import to_data
+
+    data = to_data(msg)
+    if field:
+        for part in field.split("."):
+            data = data[int(part)] if isinstance(data, list) else data[part]
+    if isinstance(data, (dict, list)):
+        return yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=110) + "---\n"
+    return f"{data}\n"

@@ -37,6 +37,8 @@ COMMON_PARAMS = (
 class PpodLifecycleNode(LifecycleNode):
     """A lifecycle node with declared parameters, diagnostics and PpodError handling."""
 
+    #: Parameters every lifecycle node has (listed by ``NODE --help``).
+    COMMON_PARAMS: tuple[Param, ...] = COMMON_PARAMS
     #: The node's parameters (declared once, with descriptors).
     PARAMS: tuple[Param, ...] = ()
     #: hardware_id used in diagnostics.

@@ -6,6 +6,7 @@ class lists its fields with ``get_fields_and_field_types()``.
 
 from __future__ import annotations
 
+import array
 import importlib
 from typing import Any
 
@@ -16,7 +17,7 @@ def to_data(msg: Any) -> Any:
     """A message (or field value) as dicts, lists and scalars, recursively."""
     if hasattr(msg, "get_fields_and_field_types"):
         return {name: to_data(getattr(msg, name)) for name in msg.get_fields_and_field_types()}
-    if isinstance(msg, np.ndarray):
+    if isinstance(msg, (np.ndarray, array.array)):  # rclpy gives numeric sequences as array.array
         return msg.tolist()
     if isinstance(msg, (list, tuple)):
         return [to_data(v) for v in msg]

@@ -46,8 +46,12 @@ def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) 
     argv : sequence of str, optional
         Command line including ``--ros-args ...`` (default: ``sys.argv``).
     """
-    configure_ros_environment()
     argv = list(sys.argv if argv is None else argv)
+    ours = argv[1:argv.index("--ros-args")] if "--ros-args" in argv else argv[1:]
+    if "-h" in ours or "--help" in ours:
+        print(node_help(factory, os.path.basename(argv[0]) if argv else "node"))
+        return 0
+    configure_ros_environment()
     context = Context()
     rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
@@ -98,6 +102,23 @@ def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) 
         for s, h in previous.items():
             signal.signal(s, h)
     return status
+
+
+def node_help(factory: Callable[..., object], prog: str) -> str:
+    """What ``NODE --help`` prints: the node module's docstring, its parameters and how to run it."""
+    module = sys.modules.get(getattr(factory, "__module__", ""), None)
+    lines = [f"usage: {prog} [--ros-args -r __node:=NAME --params-file FILE -p NAME:=VALUE ...]", ""]
+    lines.append((getattr(module, "__doc__", None) or getattr(factory, "__doc__", None) or "").strip())
+    params = list(getattr(factory, "COMMON_PARAMS", ())) + list(getattr(factory, "PARAMS", ()))
+    if params:
+        lines += ["", "parameters (ros__parameters; 'runtime': ros2 param set applies it at once, "
+                  "otherwise read-only after start-up):"]
+        for p in params:
+            when = "runtime" if getattr(p, "runtime", False) else "startup"
+            lines.append(f"  {p.name} = {p.default!r}  [{when}]  {p.description}")
+    lifecycle = any(p.name == "autostart" for p in params)
+    lines += ["", "example:", f"  {prog} --ros-args " + ("-p autostart:=true" if lifecycle else "--params-file FILE")]
+    return "\n".join(lines)
 
 
 def make_main(factory: Callable[..., object]) -> Callable[[Sequence[str] | None], int]:

@@ -13,15 +13,14 @@ from __future__ import annotations
 import os
 import re
 import signal
-import socket
 import threading
 import time
 from dataclasses import replace
-from importlib import resources
 from pathlib import Path
 from typing import IO
 
 from ppod_nodes.launch import runfile
+from ppod_nodes.launch.ros_launch import free_port, launch_substitutions  # noqa: F401 - free_port re-exported
 from ppod_nodes.launch.spec import LaunchSpec, NodeSpec, deep_merge
 from ppod_nodes.launch.supervisor import Supervisor
 from ppod_nodes.ros_env import configure_ros_environment
@@ -51,7 +50,7 @@ class Stack:
             if key in self.env:
                 os.environ[key] = self.env[key]
         os.environ.pop("ROS_LOCALHOST_ONLY", None)
-        self.substitutions = {"sim_port": free_port(), "data": str(resources.files("ppod_ros") / "data")}
+        self.substitutions = launch_substitutions()
         self.supervisor = Supervisor(self.env, sim, out=out, log_dir=log_dir, substitutions=self.substitutions)
         self.stop_event = threading.Event()
         self.failed: list[str] = []
@@ -177,13 +176,6 @@ class Stack:
                             "still running: " + ", ".join(c.spec.name for c in left))
         self.supervisor.close()
         return clean and not left
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that is free now (for the simulator's CAN bridge)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _with_params(node: NodeSpec, extra: dict) -> NodeSpec:

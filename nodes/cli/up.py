@@ -11,7 +11,7 @@ discovery_range or the environment's PPOD_DISCOVERY_RANGE says SUBNET (lab netwo
 examples:
   ppod up --sim                         the stack against the simulated device, until Ctrl-C
   ppod up --sim --duration 20           ... for 20 seconds
-  ppod up --config config/lab.yaml      against the real device, lab configuration
+  ppod up --config config/lab.yaml      against the real device (copy config/lab.example.yaml)
   ppod up --sim --only sim_device waveform_generator --log-dir out/logs
 """
 

@@ -10,6 +10,12 @@ The same configuration runs in the lab and in tests (STYLE.md rule 5):
 other          any python-can interface (``pcan``, ``kvaser``, ``vector``, ``slcan``, ...) with
                ``channel`` and ``bitrate`` passed through
 =============  ==================================================================================
+
+Backend-specific keywords come from ``can.options`` in the device description and are passed to
+``can.Bus`` unchanged, e.g. ``{tty_baudrate: 115200}`` for slcan, ``{fd: true, data_bitrate: 2000000}``
+for pcan, ``{accept_virtual: true}`` for kvaser. Whatever a backend raises while opening (python-can
+errors, OS errors, and the odd ``NameError`` of a vendor library that is not installed) becomes one
+:class:`DeviceError` line naming the backend, the channel and the cause.
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from ppod_ros.errors import ConfigError, DeviceError
 
 
 def _virtual(channel: str, bitrate: int, extra: dict[str, Any]) -> can.BusABC:
-    return can.Bus(interface="virtual", channel=channel, receive_own_messages=False, **extra)
+    return can.Bus(interface="virtual", channel=channel, **{"receive_own_messages": False, **extra})
 
 
 def _remote(channel: str, bitrate: int, extra: dict[str, Any]) -> can.BusABC:
@@ -76,6 +82,8 @@ def open_bus(
     DeviceError
         The backend exists but the bus could not be opened (no server, no interface, ...).
     """
+    if settings is not None and settings.options:
+        extra = {**dict(settings.options), **extra}  # keyword overrides win over the file's options
     interface = interface or (settings.interface if settings else None)
     channel = channel if channel is not None else (settings.channel if settings else None)
     bitrate = bitrate or (settings.bitrate if settings else 1_000_000)
@@ -93,10 +101,11 @@ def open_bus(
         return opener(str(channel), int(bitrate), extra)
     except ConfigError:
         raise
-    except (can.CanError, OSError, ValueError, ImportError) as exc:
-        raise DeviceError(f"cannot open the {interface} bus on {channel!r}: {exc}") from exc
-
-
+    except TypeError as exc:  # a keyword the backend does not take: the configuration is wrong
+        raise ConfigError(f"can.options: the {interface} backend rejects {sorted(extra)}: {exc}") from exc
+    except Exception as exc:  # noqa: BLE001 - vendor backends raise anything (kvaser: NameError); one line
+        cause = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise DeviceError(f"cannot open the {interface} bus on {channel!r}: {type(exc).__name__}: {cause}") from exc
 
 
 def open_bus_waiting(settings: CanSettings, wait_s: float, retry_s: float = 0.2, **overrides: Any) -> can.BusABC:

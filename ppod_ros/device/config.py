@@ -167,6 +167,23 @@ def _limits(f: Fields, plate_radius_m: float, ambient_c: float) -> Limits:
     return out
 
 
+def _can_options(f: Fields) -> tuple[tuple[str, Any], ...]:
+    """``can.options``: keywords passed unchanged to python-can's ``can.Bus`` (scalars or lists)."""
+    value = f.raw("options", {})
+    if value is None:
+        return ()
+    if not isinstance(value, dict) or not all(isinstance(k, str) and k.isidentifier() for k in value):
+        raise ConfigError(f"{f.key_path('options')}: expected a mapping of python-can keyword names to values, "
+                          f"e.g. {{tty_baudrate: 115200}}, got {value!r}")
+    for k, v in value.items():
+        if not isinstance(v, (str, int, float, bool, list)):
+            raise ConfigError(f"{f.key_path('options')}.{k}: expected a number, string, boolean or list, got {v!r}")
+    reserved = sorted(set(value) & {"interface", "channel", "bitrate"})
+    if reserved:
+        raise ConfigError(f"{f.key_path('options')}: {', '.join(reserved)} belong in can.{reserved[0]}, not options")
+    return tuple(sorted(value.items()))
+
+
 def _can(f: Fields) -> CanSettings:
     out = CanSettings(
         interface=f.string("interface"),
@@ -180,6 +197,7 @@ def _can(f: Fields) -> CanSettings:
         summary_harmonics=f.integer("summary_harmonics", min_value=1, max_value=MAX_HARMONIC),
         raw_frame_rate_hz=_positive(f, "raw_frame_rate_hz", "Hz"),
         bus_load_limit=f.number("bus_load_limit", min_value=0.0, max_value=1.0, exclusive_min=True),
+        options=_can_options(f),
     )
     f.finish()
     if not out.interface:

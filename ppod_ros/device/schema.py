@@ -128,6 +128,8 @@ class CanSettings:
     summary_harmonics: int
     raw_frame_rate_hz: float
     bus_load_limit: float
+    #: Backend-specific keywords for ``can.Bus`` (``can.options``), as sorted (name, value) pairs.
+    options: tuple[tuple[str, Any], ...] = ()
 
 
 @dataclass(frozen=True)

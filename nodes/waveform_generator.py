@@ -33,6 +33,7 @@ from ppod_nodes.common.runner import make_main
 from ppod_ros.actuation.generator import GeneratorState, GoalOutcome, WaveformGenerator
 from ppod_ros.actuation.planning import GoalPlanner
 from ppod_ros.can import DeviceLink, open_bus, open_bus_waiting, send_estop
+from ppod_ros.can.load import MeteredBus
 from ppod_ros.device import load_device_config
 from ppod_ros.errors import ConfigError, DeviceError
 from ppod_ros.motion import PlateMotion
@@ -79,7 +80,8 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         config = load_device_config(params["device_config"] or None)
         overrides = {k: params[f"can_{k}"] for k in ("interface", "channel") if params[f"can_{k}"]}
         self.config = config.with_can(**overrides) if overrides else config
-        self.bus = open_bus_waiting(self.config.can, params["bus_wait_s"])
+        # Metered: DeviceStatus.bus_load is the wire time of every frame seen over the last second.
+        self.bus = MeteredBus(open_bus_waiting(self.config.can, params["bus_wait_s"]), self.config.can.bitrate)
         self.link = DeviceLink(self.bus, self.config)
         try:
             self.link.start()
@@ -274,6 +276,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         msg.frames_rx = int(health["frames_accepted"])
         msg.frames_tx = int(health["frames_sent"])
         msg.frames_rejected = int(health["frames_rejected"])
+        msg.bus_load = float(self.bus.load()) if isinstance(self.bus, MeteredBus) else 0.0
         self.device_pub.publish(msg)
         level = diag.ERROR if health["stale"] or s.fault_names else diag.OK
         text = "device silent (no STATUS)" if health["stale"] else (", ".join(s.fault_names) or health["state"])

@@ -7,6 +7,8 @@ rclpy.init() (see docs/ros.md). Matplotlib renders headless.
 import os
 import random
 
+import pytest
+
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_LOCALHOST_ONLY", None)
 os.environ.setdefault("MPLBACKEND", "Agg")
@@ -14,6 +16,37 @@ if "PPOD_TEST_DOMAIN_ID" not in os.environ:
     # Domain ids 1..101 leave room for the ports of several concurrent sessions on one machine.
     os.environ["PPOD_TEST_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 101))
 os.environ["ROS_DOMAIN_ID"] = os.environ["PPOD_TEST_DOMAIN_ID"]
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--hardware", metavar="CONFIG", default=None,
+        help="run the system tests marked 'hardware' against the real device described by CONFIG (a device "
+             "description YAML whose can.interface/channel reach it, e.g. socketcan can0; docs/device.md) "
+             "instead of the simulated device; every other system test is skipped. Without it, 'hardware' "
+             "tests run against the simulator.")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "hardware: a system test that also runs against the real device "
+                                       "(pytest --hardware CONFIG); uses tests.system.stack.device_stack")
+    path = config.getoption("--hardware")
+    if path:
+        from pathlib import Path
+
+        from ppod_ros.device.config import load_device_config
+
+        load_device_config(path)  # a malformed description stops the run here, in one line
+        os.environ["PPOD_TEST_HARDWARE_CONFIG"] = str(Path(path).resolve())
+
+
+def pytest_collection_modifyitems(config, items):
+    if not config.getoption("--hardware"):
+        return
+    skip = pytest.mark.skip(reason="--hardware: only tests marked 'hardware' run against the real device")
+    for item in items:
+        if "system" in item.keywords and "hardware" not in item.keywords:
+            item.add_marker(skip)
 
 
 def pytest_sessionfinish(session, exitstatus):
@@ -27,9 +60,6 @@ def pytest_sessionfinish(session, exitstatus):
     if fastdds.exists() or shutil.which("fastdds"):
         subprocess.run([str(fastdds) if fastdds.exists() else "fastdds", "shm", "clean"],
                        capture_output=True, timeout=30)
-
-
-import pytest  # noqa: E402
 
 
 @pytest.fixture

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 from pathlib import Path
 
 import yaml
@@ -43,3 +44,33 @@ def running_stack(tmp_path: Path, nodes: list[dict], **spec_extra):
 
 def log_text(tmp_path: Path) -> str:
     return (tmp_path / "stack.log").read_text()
+
+
+def hardware_config() -> str | None:
+    """The device description given with ``pytest --hardware CONFIG``, or None (simulated device)."""
+    return os.environ.get("PPOD_TEST_HARDWARE_CONFIG") or None
+
+
+@contextlib.contextmanager
+def device_stack(tmp_path: Path, nodes: list[dict], **spec_extra):
+    """:func:`running_stack` against the simulated device, or the real one with ``--hardware CONFIG``.
+
+    ``nodes`` are the host nodes (GENERATOR, FEEDBACK, ...); the simulator is added here when no
+    hardware is given. On hardware, each node gets ``device_config: CONFIG`` and no sim parameters.
+    """
+    config = hardware_config()
+    if config is None:
+        with running_stack(tmp_path, [SIM, *nodes], **spec_extra) as stack:
+            yield stack
+        return
+    hw_nodes = [{**n, "params": {**n.get("params", {}), "device_config": config}} for n in nodes]
+    data = {"shutdown_timeout_s": 10, "lifecycle_timeout_s": 90, "nodes": hw_nodes, **spec_extra}
+    (tmp_path / "stack.yaml").write_text(yaml.safe_dump(data))
+    spec = launch_spec_from_dict(data, str(tmp_path / "stack.yaml"))
+    with open(tmp_path / "stack.log", "w") as log:
+        stack = Stack(spec, sim=False, out=log, handle_signals=False)
+        try:
+            stack.start()
+            yield stack
+        finally:
+            stack.stop()

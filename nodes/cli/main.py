@@ -28,6 +28,7 @@ SUBCOMMANDS: dict[str, str] = {
     "field": "field",
     "echo": "echo",
     "record": "record",
+    "view": "view",
     "replay": "replay",
     "bench": "bench",
 }

@@ -1,8 +1,10 @@
 """Record the stack's topics to an MCAP file (ROS 2 serialization; rosbag2 and Foxglove read it).
 
-By default every /ppod topic (goals, status, accelerations, poses, simulation ground truth and the
-scenario the simulated device publishes: its configuration, seed and initial part states) plus
-/diagnostics, except camera images (large: add --images). Stop with Ctrl-C or --duration.
+By default every /ppod topic (goals, status, accelerations, poses, simulation ground truth, the
+scenario the simulated device publishes, the drawable /ppod/viz topics), MovePart's action feedback
+and status, /tf, /rosout and /diagnostics, except camera images (large: add --images). The file
+follows the MCAP ros2 profile as rosbag2 writes it (ros2msg schemas, cdr channels with
+offered_qos_profiles, the rosbag2 metadata record). Stop with Ctrl-C or --duration.
 
 examples:
   ppod record out/session.mcap --duration 30
@@ -18,6 +20,8 @@ import threading
 import time
 from pathlib import Path
 
+from ppod_nodes.common import topics
+
 HELP = "record ppod topics to MCAP (ROS 2 serialization)"
 
 
@@ -28,13 +32,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
 
 
+#: Recorded by default besides /ppod/... (names from nodes/common/topics.py).
+ALWAYS = frozenset({topics.DIAGNOSTICS, topics.TF, topics.ROSOUT})
+
+
 def default_include(images: bool):
     def include(topic: str, type_name: str) -> bool:
         if type_name == "sensor_msgs/msg/Image" and not images:
             return False
         if "/_action/" in topic:
-            return False  # action internals (goal/feedback/status): not replayed, no plain msg type
-        return topic.startswith("/ppod/") or topic == "/diagnostics"
+            # Feedback and status are what an operator saw; goal/result/cancel are services anyway.
+            return topic.endswith("/_action/feedback") or topic.endswith("/_action/status")
+        return topic.startswith("/ppod/") or topic in ALWAYS
 
     return include
 

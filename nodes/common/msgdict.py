@@ -37,10 +37,16 @@ def type_from_name(type_name: str):
         raise ValueError(f"message type must look like pkg/msg/Name, got {type_name!r}")
     pkg, kind, name = parts
     module = importlib.import_module(f"{pkg}.{kind}")
-    try:
+    if hasattr(module, name):
         return getattr(module, name)
-    except AttributeError as exc:
-        raise ValueError(f"{pkg}.{kind} has no type {name}") from exc
+    # An action's generated types (the _action/feedback topic's Name_FeedbackMessage, ...).
+    action, _, part = name.rpartition("_")
+    if kind == "action" and hasattr(module, action):
+        cls = getattr(module, action)
+        found = getattr(cls, part, None) or getattr(getattr(cls, "Impl", None), part, None)
+        if found is not None:
+            return found
+    raise ValueError(f"{pkg}.{kind} has no type {name}")
 
 
 def type_name_of(cls) -> str:

@@ -25,3 +25,10 @@ MOVE_PART = "ppod/move_part"                     # ppod_msgs/MovePart action
 SIM_TRUE_POSES = "ppod/sim/ground_truth/part_poses"        # ppod_msgs/PartPoseArray
 SIM_TRUE_ACCELERATION = "ppod/sim/ground_truth/plate_acceleration"  # ppod_msgs/PlateAcceleration
 DIAGNOSTICS = "/diagnostics"                     # diagnostic_msgs/DiagnosticArray
+# drawable and plottable (nodes/viz.py; docs/ros.md, "Drawable topics")
+VIZ_MARKERS = "ppod/viz/markers"                 # visualization_msgs/MarkerArray: plate, parts, goals, field
+TF = "/tf"                                       # ppod_msgs/TFMessage (recorded as tf2_msgs/msg/TFMessage)
+ACCEL_GOAL_PLOT = "ppod/viz/accel_goal"          # geometry_msgs/AccelStamped: goal amplitude, harmonic 1
+ACCEL_MEASURED_PLOT = "ppod/viz/accel_measured"  # geometry_msgs/AccelStamped: measured amplitude, harmonic 1
+MOVE_PART_TARGET = "ppod/move_part/target"       # ppod_msgs/PartPoseArray, latched: targets of MovePart goals
+ROSOUT = "/rosout"                               # rcl_interfaces/Log: every node's log (recorded)

@@ -36,6 +36,7 @@ EXECUTABLES: dict[str, str] = {
     "ppod_nodes.accel_feedback": "ppod-accel-feedback",
     "ppod_nodes.part_tracker": "ppod-part-tracker",
     "ppod_nodes.field_planner": "ppod-field-planner",
+    "ppod_nodes.viz": "ppod-viz",
 }
 
 _PLACEHOLDER = re.compile(r"\{[A-Za-z_][A-Za-z0-9_]*\}")

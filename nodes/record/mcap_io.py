@@ -25,6 +25,26 @@ from ppod_nodes.record.msgdef import full_definition
 from ppod_ros.errors import ConfigError
 
 PROFILE = "ros2"
+#: Types recorded under another, wire-identical name: no tf2_msgs wheel exists, so TF travels as
+#: ppod_msgs/msg/TFMessage (same definition) and is written as the type every ROS tool draws.
+RECORDED_AS = {"ppod_msgs/msg/TFMessage": "tf2_msgs/msg/TFMessage"}
+_RECORDED_FROM = {v: k for k, v in RECORDED_AS.items()}
+#: rosbag2's QoS enumerations as it writes them in ``offered_qos_profiles`` (rmw_qos_*_policy_e).
+_INFINITE = {"sec": 2147483647, "nsec": 4294967295}
+
+
+def qos_profiles_yaml(infos) -> str:
+    """rosbag2's ``offered_qos_profiles`` channel metadata: the publishers' QoS as a YAML list."""
+    import yaml
+
+    out = []
+    for i in infos:
+        q = i.qos_profile
+        out.append({"history": int(q.history), "depth": int(q.depth), "reliability": int(q.reliability),
+                    "durability": int(q.durability), "deadline": dict(_INFINITE), "lifespan": dict(_INFINITE),
+                    "liveliness": int(q.liveliness), "liveliness_lease_duration": dict(_INFINITE),
+                    "avoid_ros_namespace_conventions": bool(q.avoid_ros_namespace_conventions)})
+    return yaml.safe_dump(out, sort_keys=False)
 
 
 @dataclass
@@ -67,6 +87,10 @@ class McapRecorder:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._subs: dict[str, Any] = {}
+        self._types: dict[str, str] = {}
+        self._qos: dict[str, str] = {}
+        self._first_ns: int | None = None
+        self._last_ns = 0
         self.counts: dict[str, int] = {}
         self._closed = False
         self._timer = node.create_timer(discovery_period_s, self.discover)
@@ -96,10 +120,15 @@ class McapRecorder:
                              if any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos)
                              else ReliabilityPolicy.RELIABLE),
             )
+            schema_name = RECORDED_AS.get(type_name, type_name)
             with self._lock:
-                if type_name not in self._schemas:
-                    self._schemas[type_name] = self._writer.register_schema(type_name, "ros2msg", definition.encode())
-                self._channels[topic] = self._writer.register_channel(topic, "cdr", self._schemas[type_name])
+                if schema_name not in self._schemas:
+                    self._schemas[schema_name] = self._writer.register_schema(schema_name, "ros2msg",
+                                                                              definition.encode())
+                self._qos[topic] = qos_profiles_yaml(infos)
+                self._channels[topic] = self._writer.register_channel(
+                    topic, "cdr", self._schemas[schema_name], metadata={"offered_qos_profiles": self._qos[topic]})
+                self._types[topic] = schema_name
             self.counts[topic] = 0
             self._subs[topic] = self.node.create_subscription(
                 msg_type, topic, lambda data, t=topic: self._write(t, data), qos, raw=True)
@@ -112,17 +141,43 @@ class McapRecorder:
             self._writer.add_message(self._channels[topic], log_time=now, data=data, publish_time=now,
                                      sequence=self.counts[topic])
             self.counts[topic] += 1
+            self._first_ns = now if self._first_ns is None else self._first_ns
+            self._last_ns = now
+
+    def _rosbag2_metadata(self) -> str:
+        return _rosbag2_metadata_text(self.counts, self._types, self._first_ns, self._last_ns, self.path, self._qos)
 
     def close(self) -> None:
         with self._lock:
             if self._closed:
                 return
             self._closed = True
+            self._writer.add_metadata("rosbag2", {"serialized_metadata": self._rosbag2_metadata()})
             # The subscriptions and the timer stay until the node is destroyed: destroying them here,
             # from another thread while the executor waits on them, is the rclpy teardown race of
             # ROS_NOTES.md. Callbacks see _closed and drop what still arrives.
             self._writer.finish()
             self._file.close()
+
+
+def _rosbag2_metadata_text(counts: dict[str, int], types: dict[str, str], first_ns: int | None,
+                           last_ns: int, path: Path, qos: dict[str, str] | None = None) -> str:
+    """rosbag2's metadata.yaml content (``rosbag_bagfile_information``) for the MCAP ``rosbag2`` record."""
+    import yaml
+
+    start = first_ns or 0
+    info = {"version": 9, "storage_identifier": "mcap", "relative_file_paths": [path.name],
+            "duration": {"nanoseconds": max(0, last_ns - start)}, "starting_time": {"nanoseconds_since_epoch": start},
+            "message_count": sum(counts.values()),
+            "topics_with_message_count": [
+                {"topic_metadata": {"name": t, "type": types[t], "serialization_format": "cdr",
+                                    "offered_qos_profiles": (qos or {}).get(t, ""), "type_description_hash": ""},
+                 "message_count": n} for t, n in sorted(counts.items()) if t in types],
+            "compression_format": "", "compression_mode": "", "files": [
+                {"path": path.name, "starting_time": {"nanoseconds_since_epoch": start},
+                 "duration": {"nanoseconds": max(0, last_ns - start)}, "message_count": sum(counts.values())}],
+            "custom_data": {}, "ros_distro": "jazzy"}
+    return yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False)
 
 
 def read_mcap(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[RecordedMessage]:
@@ -136,7 +191,8 @@ def read_mcap(path: str | Path, topics: Iterable[str] | None = None) -> Iterator
                                                              log_time_order=True):
             if channel.message_encoding != "cdr" or schema is None:
                 continue
-            yield RecordedMessage(channel.topic, schema.name, message.log_time, message.data)
+            type_name = _RECORDED_FROM.get(schema.name, schema.name)  # decodable with the installed types
+            yield RecordedMessage(channel.topic, type_name, message.log_time, message.data)
 
 
 def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:

@@ -41,7 +41,7 @@ def msg_file(type_name: str) -> Path:
 
 def _split(type_name: str) -> tuple[str, str]:
     parts = type_name.split("/")
-    if len(parts) == 3 and parts[1] == "msg":
+    if len(parts) == 3 and parts[1] in ("msg", "action"):
         return parts[0], parts[2]
     if len(parts) == 2:
         return parts[0], parts[1]
@@ -58,11 +58,43 @@ def _dependencies(pkg: str, text: str) -> list[str]:
     return deps
 
 
+_ACTION_PART = re.compile(r"^(?P<action>\w+)_(?P<part>Goal|Result|Feedback|FeedbackMessage)$")
+
+
+def _action_text(pkg: str, name: str) -> str | None:
+    """Text of an action's generated types (``Name_Feedback``, ``Name_FeedbackMessage``, ...), or None.
+
+    The sections of ``share/<pkg>/action/<Action>.action`` are goal, result and feedback; the
+    feedback message that goes on the ``_action/feedback`` topic is a goal id and the feedback.
+    """
+    m = _ACTION_PART.match(name)
+    if not m:
+        return None
+    for prefix in _prefixes():
+        path = prefix / "share" / pkg / "action" / f"{m['action']}.action"
+        if path.is_file():
+            sections = re.split(r"^---\s*$", path.read_text(), flags=re.MULTILINE)
+            if m["part"] == "FeedbackMessage":
+                return f"unique_identifier_msgs/UUID goal_id\n{m['action']}_Feedback feedback\n"
+            return sections[{"Goal": 0, "Result": 1, "Feedback": 2}[m["part"]]].strip("\n") + "\n"
+    return None
+
+
+def _text(type_name: str) -> str:
+    pkg, name = _split(type_name)
+    action = _action_text(pkg, name)
+    return action if action is not None else msg_file(type_name).read_text()
+
+
 @cache
 def full_definition(type_name: str) -> str:
-    """The rosbag2-style definition of ``pkg/msg/Name`` with all nested types, depth-first."""
+    """The rosbag2-style definition of ``pkg/msg/Name`` with all nested types, depth-first.
+
+    Action feedback types (``pkg/action/Name_FeedbackMessage``, the ``_action/feedback`` topics) are
+    built from the ``.action`` file.
+    """
     pkg, name = _split(type_name)
-    text = msg_file(type_name).read_text()
+    text = _text(type_name)
     parts = [text.rstrip("\n")]
     seen = {f"{pkg}/{name}"}
     stack = list(reversed(_dependencies(pkg, text)))
@@ -75,8 +107,9 @@ def full_definition(type_name: str) -> str:
             continue
         seen.add(key)
         order.append(key)
-        stack.extend(reversed(_dependencies(dpkg, msg_file(key).read_text())))
+        stack.extend(reversed(_dependencies(dpkg, _text(key))))
     for key in order:
         dpkg, dname = _split(key)
-        parts.append(f"{SEPARATOR}\nMSG: {dpkg}/msg/{dname}\n" + msg_file(key).read_text().rstrip("\n"))
+        kind = "action" if _action_text(dpkg, dname) is not None else "msg"
+        parts.append(f"{SEPARATOR}\nMSG: {dpkg}/{kind}/{dname}\n" + _text(key).rstrip("\n"))
     return "\n".join(parts) + "\n"

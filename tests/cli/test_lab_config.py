@@ -11,7 +11,7 @@ LAB = Path(__file__).parents[2] / "config" / "lab.example.yaml"
 def test_the_lab_example_runs_every_node_on_can0_without_the_simulator(tmp_path):
     spec = load_launch_spec(LAB)
     assert [n.name for n in spec.selected(sim=False)] == ["waveform_generator", "accel_feedback", "part_tracker",
-                                                          "field_planner"]
+                                                          "field_planner", "viz"]
     entries = {e.name: e for e in launch_entries(LAB, sim=False, out_dir=tmp_path)}
     for name in ("waveform_generator", "accel_feedback"):
         assert entries[name].parameters["can_interface"] == "socketcan"

@@ -108,6 +108,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         self.running: _RunningTask | None = None
         self._poses: PartPoseArray | None = None
         self.goal_pub = self.create_lifecycle_publisher(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+        self.target_pub = self.create_publisher(PartPoseArray, topics.MOVE_PART_TARGET, qos.LATCHED)  # drawn by viz
         self.create_service(PlanField, topics.PLAN_FIELD, self._on_plan_field)
         self.create_subscription(PartPoseArray, topics.PART_POSES, self._on_poses, qos.STREAM)
         self._stop_client = self.create_client(Trigger, topics.STOP)
@@ -227,6 +228,7 @@ class FieldPlannerNode(PpodLifecycleNode):
             self.get_logger().error(f"MovePart: {exc}")
             return result
         self.running = _RunningTask(handle, task, ids, goal, self._now())
+        self.target_pub.publish(PartPoseArray(parts=[PartPose(id=goal.part_id, label="target", pose=goal.target)]))
         self.get_logger().info(f"MovePart: part {goal.part_id} to ({goal.target.x:.4f}, {goal.target.y:.4f}"
                                + (f", {math.degrees(goal.target.theta):.1f} deg)" if goal.use_orientation else ")")
                                + (f", others to ({goal.collect_x_m:.3f}, {goal.collect_y_m:.3f})"

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from geometry_msgs.msg import Pose2D
 from ppod_msgs.msg import PartPose, PartPoseArray
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CameraInfo, Image
 
 from ppod_nodes.common import diagnostics as diag
 from ppod_nodes.common import qos, topics
@@ -41,32 +41,26 @@ from ppod_ros.vision import (
     load_tracker_config,
     open_source,
 )
+from ppod_ros.vision.ros_camera import (
+    decode_image,
+    intrinsics_from_camera_info,
+    load_ost_yaml,
+    to_encoding,
+    with_intrinsics,
+)
 
 
 def default_tracker_config_path() -> Path:
     return Path(str(resources.files("ppod_ros") / "data" / "tracker.yaml"))
 
 
-_ENCODINGS = {"mono8": 1, "bgr8": 3, "rgb8": 3}
+def image_to_array(msg: Image, encoding: str | None = None) -> np.ndarray:
+    """A sensor_msgs/Image as uint8 (H, W) or (H, W, 3) BGR, in ``encoding`` if given; BadFrameError if malformed.
 
-
-def image_to_array(msg: Image) -> np.ndarray:
-    """A sensor_msgs/Image as a uint8 array (H, W) or (H, W, 3); ConfigError if malformed."""
-    channels = _ENCODINGS.get(msg.encoding)
-    if channels is None:
-        raise BadFrameError(f"unsupported encoding {msg.encoding!r} (mono8, bgr8, rgb8)", "encoding")
-    if msg.height == 0 or msg.width == 0:
-        raise BadFrameError("empty image", "empty")
-    need = msg.height * msg.step
-    data = np.frombuffer(msg.data, dtype=np.uint8)
-    if msg.step < msg.width * channels or data.size < need:
-        raise BadFrameError(f"image data of {data.size} bytes does not fit {msg.width}x{msg.height} "
-                            f"{msg.encoding} with step {msg.step}", "size")
-    rows = data[:need].reshape(msg.height, msg.step)[:, : msg.width * channels]
-    image = rows.reshape(msg.height, msg.width, channels) if channels == 3 else rows
-    if msg.encoding == "rgb8":
-        image = image[:, :, ::-1]
-    return image
+    Reads mono8, mono16, bgr8, rgb8 and the 8-bit Bayer patterns (ppod_ros.vision.ros_camera).
+    """
+    image = decode_image(msg.encoding, msg.width, msg.height, msg.step, msg.data, bool(msg.is_bigendian))
+    return image if encoding is None else to_encoding(image, encoding)
 
 
 def result_to_msg(result: TrackResult, frame_index: int, latency_s: float) -> PartPoseArray:
@@ -95,6 +89,10 @@ class PartTrackerNode(PpodLifecycleNode):
         Param("source", "topic", "where frames come from", choices=("topic", "capture", "file")),
         Param("source_uri", "", "camera index or URL (capture), recording path (file)"),
         Param("source_fps", 10.0, "frame rate for capture/file sources (Hz)", min_value=0.1, max_value=200.0),
+        Param("intrinsics", "", "camera_calibration's ost.yaml (or a camera_info YAML): replaces the camera "
+              "file's intrinsics; empty: the camera file's"),
+        Param("use_camera_info", False, "take the intrinsics from ppod/camera/camera_info (topic source): the "
+              "tracker is rebuilt when they change"),
     )
 
     def __init__(self, **kwargs):
@@ -109,11 +107,16 @@ class PartTrackerNode(PpodLifecycleNode):
         self._window: list[tuple[float, float]] = []  # (wall time, processing s)
         self._diag_timer = None
         self._last_result: TrackResult | None = None
+        self._info_sub = None
+        self._camera = None
 
     # ------------------------------------------------------------------ lifecycle
     def on_configure_node(self, params):
         camera = CameraConfig.from_yaml(params["camera_config"]) if params["camera_config"] else CameraConfig()
+        if params["intrinsics"]:
+            camera = with_intrinsics(camera, load_ost_yaml(params["intrinsics"]))
         specs, settings = load_tracker_config(params["tracker_config"] or default_tracker_config_path())
+        self._camera, self._specs, self._settings = camera, specs, settings
         self._tracker = PartTracker(camera, specs, settings)
         if params["source"] != "topic":
             uri = params["source_uri"]
@@ -128,6 +131,9 @@ class PartTrackerNode(PpodLifecycleNode):
     def on_activate_node(self):
         if self._source is None:
             self._sub = self.create_subscription(Image, topics.IMAGE, self._on_image, qos.SENSOR_DATA)
+            if self.params["use_camera_info"] and self._info_sub is None:
+                self._info_sub = self.create_subscription(CameraInfo, topics.CAMERA_INFO, self._on_camera_info,
+                                                          qos.LATCHED)
         else:
             self._timer = self.create_timer(1.0 / self.params["source_fps"], self._read_source)
 
@@ -156,9 +162,26 @@ class PartTrackerNode(PpodLifecycleNode):
         self.on_cleanup_node()
 
     # ------------------------------------------------------------------ frames
-    def _on_image(self, msg: Image) -> None:
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        if self._tracker is None:
+            return
         try:
-            image = image_to_array(msg)
+            camera = with_intrinsics(self._camera, intrinsics_from_camera_info(
+                msg.width, msg.height, msg.k, msg.d, msg.distortion_model))
+        except ConfigError as exc:
+            self.get_logger().error(f"camera_info ignored: {exc}", throttle_duration_sec=5.0)
+            return
+        if camera != self._camera:
+            self._camera = camera
+            self._tracker = PartTracker(camera, self._specs, self._settings)
+            self.get_logger().info(f"intrinsics from camera_info: fx {camera.fx:.1f}, fy {camera.fy:.1f}, "
+                                   f"cx {camera.cx:.1f}, cy {camera.cy:.1f} px ({camera.width}x{camera.height})")
+
+    def _on_image(self, msg: Image) -> None:
+        if self._tracker is None:
+            return  # between cleanup and the last callbacks
+        try:
+            image = image_to_array(msg, self._camera.encoding)
         except BadFrameError as exc:
             self._reject(exc)
             return
@@ -193,6 +216,8 @@ class PartTrackerNode(PpodLifecycleNode):
         self._frames += 1
         now_ros = self.get_clock().now().nanoseconds * 1e-9
         latency = max(0.0, now_ros - stamp_s) if now_ros > 0 else processing
+        if self._pub is None:
+            return  # cleaned up while this frame was processed (shutdown)
         self._pub.publish(result_to_msg(result, self._frames, latency))
         self._window.append((time.monotonic(), processing))
         for event, ids in (("new", result.new_ids), ("lost", result.lost_ids), ("reacquired", result.reacquired_ids)):

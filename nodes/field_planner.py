@@ -88,6 +88,9 @@ class _RunningTask:
 
 
 class FieldPlannerNode(PpodLifecycleNode):
+    # Read per request from self.params, so a change applies to the next request (nodes/common/lifecycle.py).
+    RUNTIME_PARAMS = ("frequency_hz", "num_frequencies", "position_tolerance_m", "orientation_tolerance_deg",
+                      "timeout_s", "stop_when_done")
     PARAMS = (
         Param("device_config", "", "device description YAML; empty: the packaged default (docs/device.md)"),
         Param("tracker_config", "", "tracker file naming the part types (label -> part model); "

@@ -95,6 +95,8 @@ class PartTrackerNode(PpodLifecycleNode):
               "tracker is rebuilt when they change"),
     )
 
+    RUNTIME_PARAMS = ("source_fps",)
+
     def __init__(self, **kwargs):
         super().__init__("part_tracker", **kwargs)
         self._tracker: PartTracker | None = None
@@ -136,6 +138,11 @@ class PartTrackerNode(PpodLifecycleNode):
                                                           qos.LATCHED)
         else:
             self._timer = self.create_timer(1.0 / self.params["source_fps"], self._read_source)
+
+    def apply_parameter(self, name, value):
+        if name == "source_fps" and self._timer is not None:  # reading a camera or file: new pace now
+            self.destroy_timer(self._timer)
+            self._timer = self.create_timer(1.0 / value, self._read_source)
 
     def on_deactivate_node(self):
         if self._sub is not None:

@@ -42,6 +42,7 @@ RESET_ESTOP = "ppod/reset_emergency_stop"
 
 
 class WaveformGeneratorNode(PpodLifecycleNode):
+    RUNTIME_PARAMS = ("status_rate_hz",)  # applied at once (apply_parameter); the rest are read-only
     PARAMS = (
         Param("device_config", "", "device description YAML; empty: the packaged default (docs/device.md)"),
         Param("can_interface", "", "override can.interface (virtual, remote, socketcan, ...)"),
@@ -107,6 +108,11 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         self._status_timer = self.create_timer(1.0 / self.params["status_rate_hz"], self._publish_status)
         self._heartbeat()
         self._publish_active(None)
+
+    def apply_parameter(self, name, value):
+        if name == "status_rate_hz" and self._status_timer is not None:
+            self.destroy_timer(self._status_timer)
+            self._status_timer = self.create_timer(1.0 / value, self._publish_status)
 
     def on_deactivate_node(self):
         for sub in self._subs:

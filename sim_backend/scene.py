@@ -4,7 +4,7 @@ Scene file (YAML), strictly validated::
 
     seed: 7                                  # optional; scatter and camera noise
     parts:                                   # placed parts
-      - label: washer                        # the part type the tracker knows (config/tracker.yaml)
+      - label: washer                        # the part type the tracker knows (ppod_ros/data/tracker.yaml)
         part: {type: point, mu: 0.3, footprint: {disk: 0.006}}   # a PART.yaml mapping
         height_m: 0.002                      # height of the top face (renderer, tracker)
         pose: [0.05, 0.02, 0.0]              # x, y (m), theta (rad) in the plate frame

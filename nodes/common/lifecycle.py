@@ -21,11 +21,12 @@ from __future__ import annotations
 
 from typing import Any
 
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import State, TransitionCallbackReturn
 
 from ppod_nodes.common import diagnostics as diag
-from ppod_nodes.common.params import Param, declare, read
+from ppod_nodes.common.params import Param, checked, declare, read, with_runtime
 from ppod_ros.errors import PpodError
 
 #: Parameters every PPOD lifecycle node has.
@@ -41,16 +42,54 @@ class PpodLifecycleNode(LifecycleNode):
     COMMON_PARAMS: tuple[Param, ...] = COMMON_PARAMS
     #: The node's parameters (declared once, with descriptors).
     PARAMS: tuple[Param, ...] = ()
+    #: Parameters a running node applies at once when changed (``ros2 param set``); every other one
+    #: is declared read-only. The change updates ``self.params``, is logged, and is handed to
+    #: :meth:`apply_parameter` (override it when more than ``self.params`` must change).
+    RUNTIME_PARAMS: tuple[str, ...] = ()
     #: hardware_id used in diagnostics.
     HARDWARE_ID = "ppod"
 
     def __init__(self, node_name: str, **kwargs: Any):
         super().__init__(node_name, **kwargs)
-        declare(self, COMMON_PARAMS + tuple(self.PARAMS))
+        self._declared = {p.name: p for p in with_runtime(COMMON_PARAMS + tuple(self.PARAMS), self.RUNTIME_PARAMS)}
+        declare(self, self._declared.values())
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.add_post_set_parameters_callback(self._parameters_set)
         self.lifecycle_state = "unconfigured"
         self.params: dict[str, Any] = {}
         self.diagnostics = diag.Diagnostics(self, self.HARDWARE_ID)
         self.diagnostics.set("lifecycle", diag.OK, "unconfigured")
+
+    # --------------------------------------------------------------- runtime parameters
+    def _check_parameters(self, parameters) -> SetParametersResult:
+        # Read-only ones never get here (rclpy refuses them); runtime ones are checked like at configure.
+        for param in parameters:
+            p = self._declared.get(param.name)
+            if p is None:
+                continue
+            try:
+                checked(p, param.value)
+                self.check_parameter(param.name, param.value)
+            except PpodError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _parameters_set(self, parameters) -> None:
+        for param in parameters:
+            p = self._declared.get(param.name)
+            if p is None or not p.runtime:
+                continue
+            value = checked(p, param.value)
+            old = self.params.get(p.name, p.default)
+            self.params[p.name] = value
+            self.apply_parameter(p.name, value)
+            self.get_logger().info(f"parameter {p.name}: {old!r} -> {value!r} (applied)")
+
+    def check_parameter(self, name: str, value: Any) -> None:
+        """Refuse a runtime change (raise PpodError) beyond the declared range and choices."""
+
+    def apply_parameter(self, name: str, value: Any) -> None:
+        """Apply a runtime parameter change; ``self.params`` already holds the new value."""
 
     # --------------------------------------------------------------- subclass hooks
     def on_configure_node(self, params: dict[str, Any]) -> None:

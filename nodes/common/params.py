@@ -43,9 +43,13 @@ class Param:
     max_value: float | None = None
     choices: tuple[str, ...] | None = None
     read_only: bool = False
+    #: True: a change at run time (``ros2 param set``) is applied at once; False: the parameter is
+    #: declared read-only (set it in the parameter file; it takes effect at start-up).
+    runtime: bool = False
 
     def descriptor(self) -> ParameterDescriptor:
-        d = ParameterDescriptor(name=self.name, description=self.description, read_only=self.read_only)
+        d = ParameterDescriptor(name=self.name, description=self.description,
+                                read_only=self.read_only or not self.runtime)
         d.type = self.param_type
         if self.choices:
             d.additional_constraints = "one of: " + ", ".join(self.choices)
@@ -81,25 +85,37 @@ def declare(node, params: Iterable[Param]) -> None:
         node.declare_parameter(p.name, default, p.descriptor())
 
 
+def checked(p: Param, value: Any) -> Any:
+    """``value`` for parameter ``p`` (sequences as lists), or ConfigError naming it, its range or choices."""
+    if isinstance(value, (list, tuple)) or hasattr(value, "tolist"):
+        value = list(value.tolist() if hasattr(value, "tolist") else value)
+    if p.choices and value not in p.choices:
+        raise ConfigError(f"parameter {p.name}: expected one of {', '.join(p.choices)}, got {value!r}")
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        if p.min_value is not None and value < p.min_value:
+            raise ConfigError(f"parameter {p.name}: must be >= {p.min_value}, got {value}")
+        if p.max_value is not None and value > p.max_value:
+            raise ConfigError(f"parameter {p.name}: must be <= {p.max_value}, got {value}")
+    return value
+
+
 def read(node, params: Sequence[Param]) -> dict[str, Any]:
     """Read declared parameters into a dict keyed by name, checking choices and ranges.
 
     Raises :class:`ConfigError` naming the parameter (the node turns it into a failed transition).
     """
-    out: dict[str, Any] = {}
-    for p in params:
-        value = node.get_parameter(p.name).value
-        if isinstance(value, (list, tuple)) or hasattr(value, "tolist"):
-            value = list(value.tolist() if hasattr(value, "tolist") else value)
-        if p.choices and value not in p.choices:
-            raise ConfigError(f"parameter {p.name}: expected one of {', '.join(p.choices)}, got {value!r}")
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            if p.min_value is not None and value < p.min_value:
-                raise ConfigError(f"parameter {p.name}: must be >= {p.min_value}, got {value}")
-            if p.max_value is not None and value > p.max_value:
-                raise ConfigError(f"parameter {p.name}: must be <= {p.max_value}, got {value}")
-        out[p.name] = value
-    return out
+    return {p.name: checked(p, node.get_parameter(p.name).value) for p in params}
+
+
+def with_runtime(params: Iterable[Param], names: Iterable[str]) -> tuple[Param, ...]:
+    """``params`` with those in ``names`` marked runtime (a node's ``RUNTIME_PARAMS``); unknown names raise."""
+    from dataclasses import replace
+
+    params, names = tuple(params), set(names)
+    unknown = names - {p.name for p in params}
+    if unknown:
+        raise ConfigError(f"RUNTIME_PARAMS: no parameter named {', '.join(sorted(unknown))}")
+    return tuple(replace(p, runtime=True) if p.name in names else p for p in params)
 
 
 def nest(flat: dict[str, Any]) -> dict[str, Any]:

@@ -114,7 +114,8 @@ def node_help(factory: Callable[..., object], prog: str) -> str:
         lines += ["", "parameters (ros__parameters; 'runtime': ros2 param set applies it at once, "
                   "otherwise read-only after start-up):"]
         for p in params:
-            when = "runtime" if getattr(p, "runtime", False) else "startup"
+            runtime = getattr(p, "runtime", False) or p.name in getattr(factory, "RUNTIME_PARAMS", ())
+            when = "runtime" if runtime else "startup"
             lines.append(f"  {p.name} = {p.default!r}  [{when}]  {p.description}")
     lifecycle = any(p.name == "autostart" for p in params)
     lines += ["", "example:", f"  {prog} --ros-args " + ("-p autostart:=true" if lifecycle else "--params-file FILE")]

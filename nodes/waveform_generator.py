@@ -38,7 +38,7 @@ from ppod_ros.device import load_device_config
 from ppod_ros.errors import ConfigError, DeviceError
 from ppod_ros.motion import PlateMotion
 
-RESET_ESTOP = "ppod/reset_emergency_stop"
+RESET_ESTOP = topics.RESET_ESTOP
 
 
 class WaveformGeneratorNode(PpodLifecycleNode):

@@ -42,7 +42,7 @@ from ppod_sim.scene import load_scene
 from ppod_sim.truth import CycleTruth
 from ppod_sim.world import PartsTruth, SimWorld
 
-SCENARIO = "ppod/sim/scenario"
+SCENARIO = topics.SIM_SCENARIO
 
 
 def default_scene_path() -> Path:
@@ -78,7 +78,7 @@ class SimDeviceNode(Node):
         self.world = SimWorld(config, scene, camera, port=p["port"], rate=p["rate"],
                               seed=None if p["seed"] < 0 else p["seed"])
         self.camera = camera
-        self._clock_pub = self.create_publisher(Clock, "/clock", 10)
+        self._clock_pub = self.create_publisher(Clock, topics.CLOCK, 10)
         self._image_pub = self.create_publisher(Image, topics.IMAGE, qos.SENSOR_DATA)
         self._info_pub = self.create_publisher(CameraInfo, topics.CAMERA_INFO, qos.LATCHED)
         self._truth_pub = self.create_publisher(PartPoseArray, topics.SIM_TRUE_POSES, qos.STREAM)

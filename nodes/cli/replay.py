@@ -124,7 +124,8 @@ def _replay(plan, args) -> tuple[dict, float]:
         except DeviceError as exc:
             raise DeviceError(f"{exc} (log: {log_dir / 'replay_stack.log'})") from exc
         with RosSession("ppod_replay") as ros:
-            ros.node.create_subscription(Clock, "/clock", lambda m: clock.__setitem__(0, stamp_to_seconds(m.clock)), 10)
+            ros.node.create_subscription(Clock, topics.CLOCK,
+                                         lambda m: clock.__setitem__(0, stamp_to_seconds(m.clock)), 10)
             for topic, cls in types.items():
                 ros.node.create_subscription(
                     cls, topic, lambda m, t=topic: got[t].append((stamp_to_seconds(m.header.stamp), m)), qos.STREAM)

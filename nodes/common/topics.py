@@ -32,3 +32,10 @@ ACCEL_GOAL_PLOT = "ppod/viz/accel_goal"          # geometry_msgs/AccelStamped: g
 ACCEL_MEASURED_PLOT = "ppod/viz/accel_measured"  # geometry_msgs/AccelStamped: measured amplitude, harmonic 1
 MOVE_PART_TARGET = "ppod/move_part/target"       # ppod_msgs/PartPoseArray, latched: targets of MovePart goals
 ROSOUT = "/rosout"                               # rcl_interfaces/Log: every node's log (recorded)
+# names that lived elsewhere before (kept importable there)
+RESET_ESTOP = "ppod/reset_emergency_stop"        # std_srvs/Trigger: leave the latched emergency stop
+SIM_SCENARIO = "ppod/sim/scenario"               # std_msgs/String, latched: the simulated device's scenario
+CLOCK = "/clock"                                 # rosgraph_msgs/Clock: device time (simulated device)
+# Foxglove live-view channels (ppod view; not ROS topics)
+VIEW_SCENE = "/ppod/scene"                       # foxglove.SceneUpdate
+VIEW_TF = "/ppod/tf"                             # foxglove.FrameTransform

@@ -26,7 +26,7 @@ from ppod_nodes.record.mcap_io import read_mcap
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 
-SCENARIO = "/ppod/sim/scenario"
+SCENARIO = "/" + topics.SIM_SCENARIO
 ACTIVE = "/" + topics.ACTIVE_MOTION
 TRUE_POSES = "/" + topics.SIM_TRUE_POSES
 TRUE_ACCEL = "/" + topics.SIM_TRUE_ACCELERATION

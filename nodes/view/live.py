@@ -13,11 +13,12 @@ import threading
 import foxglove
 from foxglove.channels import FrameTransformChannel, SceneUpdateChannel
 
+from ppod_nodes.common import topics
 from ppod_nodes.view.foxglove_scene import camera_frame_transform, scene_update
 from ppod_nodes.view.state import SceneState
 
-SCENE_CHANNEL = "/ppod/scene"
-TF_CHANNEL = "/ppod/tf"
+SCENE_CHANNEL = topics.VIEW_SCENE
+TF_CHANNEL = topics.VIEW_TF
 HOST = "127.0.0.1"  # never another interface (project rule: traffic stays on loopback)
 
 

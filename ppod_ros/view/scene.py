@@ -3,8 +3,8 @@
 Frames: ``plate`` (origin at the centre of the plate's top surface, z up: PHYSICS.md's frame P) and
 ``camera`` (OpenCV convention: z along the optical axis), placed by the camera's mounting pose
 (:meth:`CameraConfig.rotation_plate_from_camera`, ``position_m``). Everything else is drawn in
-``plate``: the working disc, each tracked part (its outline where the tracker knows its footprint),
-MovePart targets, and the current field as arrows whose length is velocity x ``arrow_scale_s``.
+``plate``: the working disc, each tracked part (a disc with a heading arrow and its label), MovePart
+targets, and the current field as arrows whose length is velocity x ``arrow_scale_s``.
 
 Two adapters turn a :class:`Scene` into messages: ``ppod_nodes.viz`` (visualization_msgs/MarkerArray
 and TF, recorded by ``ppod record``) and ``ppod view`` (Foxglove SceneUpdate over the live server).
@@ -13,7 +13,7 @@ and TF, recorded by ``ppod record``) and ``ppod view`` (Foxglove SceneUpdate ove
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,7 +27,7 @@ DEFAULT_FIELD_GRID = 9
 
 @dataclass(frozen=True)
 class PartDrawing:
-    """A tracked part in the plate frame: pose (m, m, rad) and its outline (K, 2) in its own frame."""
+    """A tracked part (or a MovePart target) in the plate frame: id, label, pose (m, m, rad)."""
 
     id: int
     label: str
@@ -35,7 +35,6 @@ class PartDrawing:
     y: float
     theta: float
     tracked: bool = True
-    outline_m: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -58,7 +57,6 @@ class Scene:
     arrows: tuple[Arrow, ...] = ()
     arrow_scale_s: float = DEFAULT_ARROW_SCALE_S
     motion_name: str = ""
-    extra: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.plate_radius_m) and self.plate_radius_m > 0):

@@ -121,6 +121,7 @@ RAW_LSB_MPS2 = 2.0**-9  # raw samples: int16, +-64 m/s^2
 FREQUENCY_LSB_HZ = 1e-6  # uint32 micro-hertz
 RAMP_LSB_S = 1e-3  # uint16 milliseconds
 TIME_LSB_S = 1e-3  # uint32 milliseconds of device time
+MAX_RAMP_S = 0xFFFF * RAMP_LSB_S  # the u16 ramp field of TABLE_HEADER and CONTROL: 65.535 s
 HEARTBEAT_AGE_LSB_S = 2e-3  # uint8; 255 = 510 ms or more, or never
 COIL_RMS_LSB_A = 0.05  # uint8
 INT24_MAX = 2**23 - 1
@@ -187,6 +188,7 @@ __all__ = [
     "Fn",
     "HOST_TO_DEVICE",
     "MAX_CHANNELS",
+    "MAX_RAMP_S",
     "MAX_RAW_CYCLES",
     "MAX_RAW_SAMPLES",
     "MAX_SUMMARY_CYCLES",

@@ -107,26 +107,29 @@ def _table_ramps(config, frames) -> list[float]:
 
 def test_a_goals_starting_correction_may_reach_its_own_limit_once_and_ramps_with_the_goal(rig):
     config, device, link, gen, spy = rig
+    # Alternating signs (a yaw torque): uniform 0.6 A would lift the plate past LineSinkX's contact
+    # margin, which the envelope refuses for corrected tables too; this test is about the caps.
+    yaw = np.array([1, -1, 1, -1, 1, -1])
     goal = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0], name="LineSinkX",
                               ramp_time_s=0.4)
     gen.submit(goal)
     run(device, link, 0.05)
     drain(spy)
     k = np.array([1])
-    start = np.full((1, 6), 0.6 + 0.0j)  # over one learning step (0.2 A), within start_correction_a (1 A)
+    start = 0.6 * yaw[None, :] + 0.0j  # over one learning step (0.2 A), within start_correction_a (1 A)
     assert config.limits.correction_step_a < 0.6 < config.limits.start_correction_a
     out = gen.apply_correction(goal.key, k, start, start=True)
     assert out.applied and "clipped" not in out.reason
     np.testing.assert_allclose(gen.applied_correction_a[0], start[0], atol=2e-3)
     assert _table_ramps(config, drain(spy)) == [pytest.approx(0.4, abs=1e-3)]  # the goal's ramp, not 50 ms
     # Only the first correction of a goal is a start: a second one is an ordinary, clipped learning step.
-    again = gen.apply_correction(goal.key, k, np.full((1, 6), 1.4 + 0.0j), start=True)
+    again = gen.apply_correction(goal.key, k, 1.4 * yaw[None, :] + 0.0j, start=True)
     assert again.applied and "correction_step_a" in again.reason
     assert np.abs(gen.applied_correction_a[0] - start[0]).max() <= config.limits.correction_step_a + 2e-3
     assert _table_ramps(config, drain(spy)) == [pytest.approx(config.timing.min_ramp_s, abs=1e-3)]
     # A start larger than its own limit is clipped to it, on the next goal.
     gen.submit(LINESINKX)
-    big = gen.apply_correction(LINESINKX.key, k, np.full((1, 6), 3.0 + 0.0j), start=True)
+    big = gen.apply_correction(LINESINKX.key, k, 3.0 * yaw[None, :] + 0.0j, start=True)
     assert big.applied and "start_correction_a" in big.reason
     assert np.abs(gen.applied_correction_a[0]).max() <= config.limits.start_correction_a + 2e-3
 

@@ -84,7 +84,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         try:
             self.link.start()
             version = self.link.handshake(params["handshake_timeout_s"])
-        except DeviceError:
+        except (DeviceError, ConfigError):  # no answer, or a description beyond the device's limits
             self._close()
             raise
         self.gen = WaveformGenerator(self.link, GoalPlanner(self.config))

@@ -270,6 +270,11 @@ class GoalPlanner:
             self.plant.feedforward(active, kt) if top else np.zeros((kt, 6), complex)
         )
         prediction = self.predict(freq, currents)
+        # The nominal plant's linear legs can exceed the exact inverse kinematics by the second-order
+        # terms: the envelope takes the larger, for goals as for corrected tables.
+        linear = float(np.max(prediction.stroke_peak_m))
+        if linear > lim.leg_stroke_m:
+            raise _limit("limits.leg_stroke_m", lim.leg_stroke_m, linear, "peak leg displacement (linear model)", "m")
         self.check_table(prediction)
         ramp = motion.ramp_time_s if motion.ramp_time_s is not None else self.config.timing.default_ramp_s
         ramp = max(float(ramp), self.config.timing.min_ramp_s)

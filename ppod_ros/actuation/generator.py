@@ -108,6 +108,8 @@ class _Active:
     seqs: set[int] = field(default_factory=set)
     correction_a: np.ndarray | None = None  # applied correction (K, 6), A
     reached: bool = False  # the device has played it at full amplitude
+    last_seq: int | None = None  # the newest table sent for it: only that one is ever sent again
+    accepted: bool = False  # the device accepted one of its tables
 
 
 class WaveformGenerator:
@@ -161,7 +163,7 @@ class WaveformGenerator:
                 outcome = GoalOutcome(False, f"goal not sent: {exc}")
                 self.last_rejection = outcome
                 return outcome
-            self._active = _Active(plan, {seq}, np.zeros_like(plan.currents_a))
+            self._active = _Active(plan, {seq}, np.zeros_like(plan.currents_a), last_seq=seq)
             self._pending = {seq: _Pending(plan.currents_a, plan.frequency_hz, plan.ramp_s, self.link.clock(),
                                            None, None)}
             self._failed = None
@@ -220,6 +222,7 @@ class WaveformGenerator:
             self._pending[seq] = _Pending(result.currents_a, act.plan.frequency_hz, ramp, self.link.clock(),
                                           result.applied_a, act.correction_a)
             act.seqs.add(seq)
+            act.last_seq = seq
             act.correction_a = result.applied_a
             notes = []
             if result.blocked_rows:
@@ -304,6 +307,8 @@ class WaveformGenerator:
                 return
             if ack.result in (AckResult.ACCEPTED, AckResult.ACTIVE, AckResult.SUPERSEDED):
                 del self._pending[ack.seq]
+                if self._active is not None and ack.seq in self._active.seqs and ack.result != AckResult.SUPERSEDED:
+                    self._active.accepted = True
                 return
             self._count(f"ack_{ack.result.name.lower()}")
             self._retry_or_reject(ack.seq, pending, f"device answered {ack.result.name}",
@@ -325,6 +330,11 @@ class WaveformGenerator:
         stopping = act is None and seq == self._stop_seq
         if not stopping and (act is None or seq not in act.seqs):
             return
+        if not stopping and seq != act.last_seq:
+            # A newer table of this goal was sent since (it carries the goal and the newer
+            # correction): sending this one again would undo it.
+            self._count("superseded_by_newer")
+            return
         if retry and pending.attempts <= MAX_TABLE_RETRIES:
             try:
                 if self.link.status.state not in (DeviceState.ENABLED, DeviceState.RAMPING):
@@ -341,6 +351,7 @@ class WaveformGenerator:
                     self._stop_seq = new
                 else:
                     act.seqs.add(new)
+                    act.last_seq = new
                 return
         if stopping:
             # The stop table did not get through: disabling ramps the plate down as well.
@@ -349,7 +360,7 @@ class WaveformGenerator:
             with contextlib.suppress(DeviceError):
                 self.link.disable()
             return
-        if pending.correction_a is not None:
+        if pending.correction_a is not None and act.accepted:
             # A correction that did not reach the device: what plays is the one before it.
             self._count("corrections_dropped")
             if np.array_equal(act.correction_a, pending.correction_a):

@@ -237,7 +237,10 @@ class GoalPlanner:
                 requested=top,
             )
         self._check_frequencies(motion.frequency_hz, active.k)
-        acc_peak, ang_peak = plate_peaks(active)
+        if active.is_zero():
+            acc_peak, ang_peak, margin = 0.0, 0.0, GRAVITY_MPS2
+        else:
+            acc_peak, ang_peak, margin = motion_extremes(active.phasors(), active.k, lim.working_radius_m)
         if acc_peak > lim.plate_accel_mps2:
             raise _limit(
                 "limits.plate_accel_mps2", lim.plate_accel_mps2, acc_peak, "peak plate acceleration", "m/s^2"
@@ -250,7 +253,6 @@ class GoalPlanner:
                 "peak angular acceleration",
                 "rad/s^2",
             )
-        margin = contact_margin(active, lim.working_radius_m)
         if margin < lim.contact_margin_mps2:
             raise LimitError(
                 f"contact margin min(g + a_n) = {margin:.4g} m/s^2 over the working disc (r = "
@@ -262,7 +264,7 @@ class GoalPlanner:
             )
         kt = table_size(top, lim.max_harmonic, motion.frequency_hz, lim)
         legs = leg_trajectory(self.kinematics, active, kmax=2 * max(top, 1))
-        stroke = float(np.max(self.envelope.exact_stroke(active))) if top else 0.0
+        stroke = float(np.max(self.envelope.exact_stroke(active, legs))) if top else 0.0
         if stroke > lim.leg_stroke_m:
             raise _limit("limits.leg_stroke_m", lim.leg_stroke_m, stroke, "peak leg displacement", "m")
         freq = quantise_frequency(motion.frequency_hz)

@@ -253,3 +253,24 @@ def test_an_over_limit_answer_rejects_the_goal_with_the_devices_reason():
     finally:
         dev_bus.shutdown()
         host_bus.shutdown()
+
+
+def test_a_lost_older_correction_is_never_resent_over_a_newer_one(faulty_rig):
+    _, device, link, gen, bus = faulty_rig
+    assert gen.submit(LINESINKX).accepted
+    run(device, link, 0.8, gen)
+    k = np.array([1])
+    bus.drop = 1.0
+    lost = gen.apply_correction(None, k, np.full((1, 6), 0.05 + 0j))
+    bus.drop = 0.0
+    newer = gen.apply_correction(None, k, np.full((1, 6), 0.02j))
+    assert lost.applied and newer.applied
+    run(device, link, 1.5, gen)
+    assert gen.ack_counters.get("superseded_by_newer", 0) == 1 and gen.ack_counters.get("retries", 0) == 0
+    played = device.player.active
+    assert played.seq == newer.seq
+    sent = newer.result.currents_a
+    rows = played.currents.shape[0]
+    np.testing.assert_allclose(played.currents, sent[:rows], atol=1e-9)
+    assert not np.any(sent[rows:])
+    np.testing.assert_allclose(gen.applied_correction_a, newer.result.applied_a)

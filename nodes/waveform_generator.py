@@ -87,7 +87,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         try:
             self.link.start()
             version = self.link.handshake(params["handshake_timeout_s"])
-        except DeviceError:
+        except (DeviceError, ConfigError):  # no answer, or a description beyond the device's limits
             self._close()
             raise
         self.gen = WaveformGenerator(self.link, GoalPlanner(self.config))
@@ -151,6 +151,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         outcome = GoalOutcome.rejected(error) if error is not None else self.gen.submit(motion, dry_run)
         if not outcome.accepted:
             self.get_logger().warning(f"goal rejected: {outcome.reason}")
+            self.diagnostics.set("goal", diag.WARN, f"rejected: {outcome.reason}", limit=outcome.limit)
             self._publish_status(rejection=outcome)
         elif not dry_run:
             self.get_logger().info(f"goal '{motion.name}' accepted (table {outcome.seq}, ramp "
@@ -191,15 +192,25 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         # Iteration 0 is the goal's starting correction (stored or predicted by the learned plant).
         out = self.gen.apply_correction(None, k, table, absolute=msg.absolute, start=msg.iteration == 0)
         level = diag.OK if out.applied and not out.reason else diag.WARN
+        extra = {}
+        if out.result is not None:
+            extra = {"scale": out.result.scale, "limited_by": out.result.limited_by or "",
+                     "blocked_rows": list(out.result.blocked_rows)}
         self.diagnostics.set("correction", level, out.reason or "applied", iteration=msg.iteration,
-                             applied=out.applied)
+                             applied=out.applied, **extra)
 
     # ------------------------------------------------------------------ stop, estop
     def _on_stop(self, _request, response):
         if self.gen is None:
             response.success, response.message = False, f"not configured ({self.lifecycle_state})"
             return response
-        self.gen.stop()
+        try:
+            self.gen.stop()
+        except DeviceError as exc:
+            response.success, response.message = False, f"stop not sent ({exc}); the device's watchdog ramps " \
+                                                         f"it down when heartbeats stop reaching it"
+            self.diagnostics.set("bus", diag.ERROR, response.message)
+            return response
         self._publish_active(None)
         response.success, response.message = True, "ramping the plate to rest"
         return response
@@ -230,7 +241,11 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         if self.gen is None:
             response.success, response.message = False, f"not configured ({self.lifecycle_state})"
             return response
-        self.gen.reset_estop()
+        try:
+            self.gen.reset_estop()
+        except DeviceError as exc:
+            response.success, response.message = False, f"reset not sent: {exc}"
+            return response
         response.success, response.message = True, "emergency stop reset; the device is disabled until a goal"
         return response
 
@@ -264,6 +279,9 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         self.status_pub.publish(msg)
         if state != self._last_state and state == GeneratorState.FAULT:
             self.get_logger().error(f"device fault: {reason}")
+        if state != self._last_state and state == GeneratorState.REJECTED and rejection is None:
+            self.get_logger().warning(reason)  # the device refused the table: said once, kept in the status
+            self.diagnostics.set("goal", diag.WARN, reason)
         self._last_state = state
         self._publish_device_status()
 
@@ -286,7 +304,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         self.device_pub.publish(msg)
         level = diag.ERROR if health["stale"] or s.fault_names else diag.OK
         text = "device silent (no STATUS)" if health["stale"] else (", ".join(s.fault_names) or health["state"])
-        self.diagnostics.set("device", level, text, **health)
+        self.diagnostics.set("device", level, text, **health, **self.gen.ack_counters)
 
 
 main = make_main(WaveformGeneratorNode)

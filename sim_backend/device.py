@@ -33,6 +33,7 @@ from ppod_ros.can.codec import (
     CoilRms,
     CoilTemps,
     Control,
+    DeviceLimit,
     Estop,
     FaultEvent,
     FrameCounters,
@@ -42,6 +43,7 @@ from ppod_ros.can.codec import (
     StatusExt,
     TableAck,
     TableCommit,
+    TableCrc,
     TableEntry,
     TableHeader,
     Version,
@@ -54,6 +56,7 @@ from ppod_ros.can.protocol import (
     Command,
     DeviceState,
     Fault,
+    LimitItem,
 )
 from ppod_ros.device.config import DeviceConfig
 from ppod_ros.motion import MAX_HARMONIC, PlateMotion
@@ -80,6 +83,22 @@ class _Ahead:
     rows_per_chunk: int
     version: int
     next_chunk: int = 0
+
+
+def device_limits(config: DeviceConfig) -> list[float]:
+    """The values the device reports in DEVICE_LIMIT frames, indexed by LimitItem (its own limits)."""
+    lim = config.limits
+    out = [0.0] * LimitItem.EXCLUDED_BAND
+    out[LimitItem.LEG_STROKE_M] = lim.leg_stroke_m
+    out[LimitItem.COIL_CURRENT_A] = lim.coil_current_a
+    out[LimitItem.AMPLIFIER_VOLTAGE_V] = lim.amplifier_voltage_v
+    out[LimitItem.COIL_TEMPERATURE_C] = lim.coil_temperature_c
+    out[LimitItem.PLATE_ACCEL_MPS2] = lim.plate_accel_mps2
+    out[LimitItem.PLATE_ANGULAR_ACCEL_RADPS2] = lim.plate_angular_accel_radps2
+    out[LimitItem.FREQUENCY_MIN_HZ], out[LimitItem.FREQUENCY_MAX_HZ] = lim.frequency_range_hz
+    for lo, hi in lim.excluded_bands_hz:
+        out += [float(lo), float(hi)]
+    return out
 
 
 class SimDevice:
@@ -119,7 +138,7 @@ class SimDevice:
         self._disabling = False
         self.last_heartbeat_s: float | None = None
         self.cycle_index = 0
-        self.tables = TableReceiver(config.limits, config.timing.min_ramp_s)
+        self.tables = TableReceiver.for_device(config)
         self.frames_tx = 0
         self.bytes_tx = 0
         self._next_status_s = 0.0
@@ -199,6 +218,9 @@ class SimDevice:
         elif isinstance(rec, TableEntry):
             self.tables.entry(rec)
             self.counters.rejected["table entry without header"] = self.tables.orphans
+        elif isinstance(rec, TableCrc):
+            self.tables.crc(rec)
+            self.counters.rejected["table entry without header"] = self.tables.orphans
         elif isinstance(rec, TableCommit):
             self._commit(rec)
         elif isinstance(rec, VersionRequest):
@@ -213,6 +235,9 @@ class SimDevice:
                     True,
                 ).encode(self.node)
             )
+            limits = device_limits(c)
+            for item, value in enumerate(limits):
+                self._send(DeviceLimit(item, len(limits), value).encode(self.node))
         elif isinstance(rec, RawRequest):
             self.telemetry.request_raw(rec.capture_id, rec.channel_mask, rec.n_cycles)
 
@@ -271,7 +296,10 @@ class SimDevice:
             self._disabling = False
             self.player.stop(self.config.timing.watchdog_ramp_s, self.time_s)
 
-    def _fault(self, flag: Fault) -> None:
+    def _fault(self, flag: Fault, at_s: float | None = None) -> None:
+        """Latch a fault; a stopping one ramps to zero from ``at_s`` (default now): the end of the
+        period in which it was detected, where what was played so far ends (no step on the coils)."""
+        at_s = self.time_s if at_s is None else at_s
         self.faults |= flag
         if self.state in (
             DeviceState.ENABLED,
@@ -280,7 +308,7 @@ class SimDevice:
             DeviceState.DISABLED,
         ):
             if self.state != DeviceState.FAULT:
-                self.player.stop(self.config.timing.watchdog_ramp_s, self.time_s)
+                self.player.stop(self.config.timing.watchdog_ramp_s, at_s)
             self.state = DeviceState.FAULT
 
     def heartbeat_age_s(self) -> float:
@@ -355,7 +383,8 @@ class SimDevice:
         self._current_end = current[-1]
         L = chunks * self.steps_per_chunk
         self._update_thermal(current, L * self.dt_s)
-        self._check_faults(current, voltage, leg)
+        # The period has been played: a fault found in it ramps down from its end, not its start.
+        self._check_faults(current, voltage, leg, self.cycle_start_s + (self.step_in_cycle + L) * self.dt_s)
         self.telemetry.pump(L * self.dt_s)
         a.next_chunk += chunks
         self.step_in_cycle += L
@@ -379,16 +408,16 @@ class SimDevice:
         res = self.plant.simulate(self.player.reference(t, theta), self.dt_s, every=m)
         return _Ahead(res, chunks, self.steps_per_chunk // m, self.player.version)
 
-    def _check_faults(self, current: np.ndarray, voltage: np.ndarray, leg: np.ndarray) -> None:
+    def _check_faults(self, current: np.ndarray, voltage: np.ndarray, leg: np.ndarray, end_s: float) -> None:
         lim = self.config.limits
         if np.max(np.abs(voltage)) > lim.amplifier_voltage_v:
-            self._fault(Fault.VOLTAGE)
+            self._fault(Fault.VOLTAGE, end_s)
         if np.max(np.abs(leg)) > lim.leg_stroke_m:
-            self._fault(Fault.STROKE)
+            self._fault(Fault.STROKE, end_s)
         if np.max(np.abs(current)) > lim.coil_current_a:
-            self._fault(Fault.OVER_CURRENT)
+            self._fault(Fault.OVER_CURRENT, end_s)
         if np.max(self.coil_temperature_c) > lim.coil_temperature_c:
-            self._fault(Fault.THERMAL)
+            self._fault(Fault.THERMAL, end_s)
 
     def _update_thermal(self, current: np.ndarray, dt_s: float) -> None:
         a = self.config.actuators
@@ -465,4 +494,4 @@ class SimDevice:
         return None if rec is None else rec.motion()
 
 
-__all__ = ["CycleTruth", "SimDevice"]
+__all__ = ["CycleTruth", "SimDevice", "device_limits"]

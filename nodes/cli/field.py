@@ -28,6 +28,8 @@ HELP = "asymptotic velocity field of a plate motion on a grid (table, JSON, plot
 
 #: Runs with more (configurations x cost) than this report progress on stderr.
 _PROGRESS_WORK = 3000
+#: Largest grid (configurations): results take about 200 bytes each, and the solver seconds each.
+MAX_CONFIGS = 1_000_000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -84,6 +86,8 @@ def _grid(values, name: str, default: tuple[float, float, int]) -> np.ndarray:
         raise ConfigError(f"--{name}: MIN and MAX must be finite, got {lo} {hi}")
     if n < 1:
         raise ConfigError(f"--{name}: N must be an integer >= 1, got {n}")
+    if n > MAX_CONFIGS:
+        raise ConfigError(f"--{name}: N = {n} is more than the {MAX_CONFIGS} configurations a field may have")
     if hi < lo:
         raise ConfigError(f"--{name}: MAX must be >= MIN, got {lo} {hi}")
     return np.linspace(lo, hi, n)
@@ -137,6 +141,10 @@ def run(args: argparse.Namespace) -> int:
         part = PointPart(mu, mu_s, part.footprint)
     xs = _grid(args.x, "x", (-0.1, 0.1, 21))
     ys = _grid(args.y, "y", (-0.1, 0.1, 21))
+    n_theta = 1 if part.kind == "point" else (8 if args.theta is None else int(float(args.theta[2])))
+    if xs.size * ys.size * n_theta > MAX_CONFIGS:
+        raise ConfigError(f"--x, --y, --theta: {xs.size} x {ys.size} x {n_theta} configurations is more than "
+                          f"the {MAX_CONFIGS} a field may have; use a coarser grid")
     if part.kind == "point":
         if args.theta is not None:
             raise ConfigError("--theta: only for rigid parts (a point part has no orientation)")
@@ -155,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"ppod field: {100 * done // total:3d}% ({done}/{total} configurations, "
                   f"{time.perf_counter() - t0:.1f} s)", file=sys.stderr, flush=True)
 
-    result = solve_field(motion, part, configs, settings, progress=progress)
+    result = _finite_only(solve_field(motion, part, configs, settings, progress=progress))
     if args.json:
         text = result.to_json()
         if args.json == "-":
@@ -175,6 +183,20 @@ def run(args: argparse.Namespace) -> int:
         print(f"ppod field: {len(result)} configurations, {int(result.valid.sum())} valid, "
               f"{result.seconds:.3f} s solver (+{result.setup_seconds:.2f} s set-up)", file=sys.stderr)
     return 0
+
+
+def _finite_only(result):
+    """A velocity that is not finite (e.g. an absurd frequency) is never reported valid."""
+    import dataclasses
+
+    from ppod_ros.physics import _layout as layout
+
+    bad = result.valid & ~np.all(np.isfinite(result.velocity), axis=1)
+    if not bad.any():
+        return result
+    valid = result.valid & ~bad
+    codes = np.where(bad, layout.NOT_CONVERGED, result.reason_code)
+    return dataclasses.replace(result, valid=valid, reason_code=codes)
 
 
 def _part_label(part) -> str:

@@ -15,6 +15,11 @@ Subclasses implement ``on_configure_node(params)``, ``on_activate_node()``,
 ``on_deactivate_node()``, ``on_cleanup_node()`` and ``on_shutdown_node()``. Core errors
 (:class:`ppod_ros.errors.PpodError`) turn into a FAILURE of the transition, a log line and an
 ERROR diagnostic; the node stays in its previous state. Other exceptions are bugs: they propagate.
+
+An invalid lifecycle request (activate while active, configure while inactive, an unknown id)
+answers ``success: false`` and leaves the node as it was: rclpy 7.1.6 lets the state machine's
+RCLError escape the change_state service callback, which kills the executor and the node, so the
+callback is wrapped here (:meth:`PpodLifecycleNode._guarded_change_state`).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from __future__ import annotations
 from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import State, TransitionCallbackReturn
 
@@ -59,6 +65,22 @@ class PpodLifecycleNode(LifecycleNode):
         self.params: dict[str, Any] = {}
         self.diagnostics = diag.Diagnostics(self, self.HARDWARE_ID)
         self.diagnostics.set("lifecycle", diag.OK, "unconfigured")
+        service = getattr(self, "_service_change_state", None)
+        if service is not None:
+            self._rclpy_change_state = service.callback
+            service.callback = self._guarded_change_state
+
+    def _guarded_change_state(self, request, response):
+        """The change_state service, answering an invalid transition with failure (module docstring)."""
+        try:
+            return self._rclpy_change_state(request, response)
+        except _rclpy.RCLError as exc:
+            label = request.transition.label or f"id {request.transition.id}"
+            message = f"invalid lifecycle transition {label} in state {self.lifecycle_state}: {exc}"
+            self.get_logger().warning(message.splitlines()[0])
+            self.diagnostics.set("lifecycle", diag.WARN, message.splitlines()[0], state=self.lifecycle_state)
+            response.success = False
+            return response
 
     # --------------------------------------------------------------- runtime parameters
     def _check_parameters(self, parameters) -> SetParametersResult:

@@ -8,6 +8,7 @@ Messages are taken raw (serialized) from the subscription, so recording costs no
 
 from __future__ import annotations
 
+import struct
 import threading
 import time
 from collections.abc import Iterable, Iterator
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -180,22 +182,47 @@ def _rosbag2_metadata_text(counts: dict[str, int], types: dict[str, str], first_
     return yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False)
 
 
+#: What a corrupt, truncated or foreign file raises inside the mcap reader (its own errors, and
+#: lower-level ones from records cut short); every one becomes a one-line ConfigError.
+_CORRUPT = (McapError, EOFError, struct.error, ValueError, IndexError, KeyError, UnicodeDecodeError,
+            MemoryError, OverflowError)
+
+
+def _corrupt(path: Path, exc: BaseException) -> ConfigError:
+    detail = " ".join(str(exc).split())[:160] or type(exc).__name__
+    return ConfigError(f"recording {path}: not a readable MCAP file (empty, truncated or corrupt): {detail}")
+
+
 def read_mcap(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[RecordedMessage]:
-    """Messages of an MCAP recording in log-time order (optionally only ``topics``)."""
+    """Messages of an MCAP recording in log-time order (optionally only ``topics``).
+
+    Raises ConfigError (one line) for a missing, empty, truncated, corrupt or non-MCAP file.
+    """
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"recording {path}: no such file")
-    with open(path, "rb") as f:
-        reader = make_reader(f)
-        for schema, channel, message in reader.iter_messages(topics=list(topics) if topics else None,
-                                                             log_time_order=True):
-            if channel.message_encoding != "cdr" or schema is None:
-                continue
-            type_name = _RECORDED_FROM.get(schema.name, schema.name)  # decodable with the installed types
-            yield RecordedMessage(channel.topic, type_name, message.log_time, message.data)
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            for schema, channel, message in reader.iter_messages(topics=list(topics) if topics else None,
+                                                                 log_time_order=True):
+                if channel.message_encoding != "cdr" or schema is None:
+                    continue
+                type_name = _RECORDED_FROM.get(schema.name, schema.name)  # decodable with the installed types
+                yield RecordedMessage(channel.topic, type_name, message.log_time, message.data)
+    except OSError as exc:
+        raise ConfigError(f"recording {path}: {exc.strerror or exc}") from exc
+    except _CORRUPT as exc:
+        raise _corrupt(path, exc) from exc
 
 
 def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
-    with open(path, "rb") as f:
-        reader = make_reader(f)
-        return {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            return {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    except OSError as exc:
+        raise ConfigError(f"recording {path}: {exc.strerror or exc}") from exc
+    except _CORRUPT as exc:
+        raise _corrupt(path, exc) from exc

@@ -18,11 +18,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from ppod_nodes.common import topics
 from ppod_nodes.common.convert import motion_from_msg, stamp_to_seconds
 from ppod_nodes.record.mcap_io import read_mcap
+from ppod_ros.config.fields import parse_yaml_text
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 
@@ -44,6 +44,15 @@ class ReplayPlan:
     nodes: list[str] = field(default_factory=list)
 
 
+def _decode(path, rec):
+    """A recorded message, or a one-line ConfigError when its bytes do not decode as its type."""
+    try:
+        return rec.decode()
+    except Exception as exc:  # noqa: BLE001 - rclpy's deserializer raises several types on corrupt bytes
+        raise ConfigError(f"recording {path}: a {rec.type_name} message on {rec.topic} does not decode "
+                          f"({type(exc).__name__}): the file is corrupt") from exc
+
+
 def plan_replay(path: str | Path) -> ReplayPlan:
     """Read a recording; ConfigError if it lacks what a replay needs."""
     scenario = None
@@ -54,9 +63,9 @@ def plan_replay(path: str | Path) -> ReplayPlan:
     for rec in read_mcap(path):
         seen_topics.add(rec.topic)
         if rec.topic == SCENARIO:
-            scenario = yaml.safe_load(rec.decode().data)
+            scenario = parse_yaml_text(_decode(path, rec).data, f"{path}: {SCENARIO}")
         elif rec.topic == ACTIVE:
-            msg = rec.decode()
+            msg = _decode(path, rec)
             t = stamp_to_seconds(msg.header.stamp)
             motion = motion_from_msg(msg) if msg.harmonics else PlateMotion.zero(name="stop")
             if not goals and motion.is_zero():
@@ -64,7 +73,7 @@ def plan_replay(path: str | Path) -> ReplayPlan:
             if not goals or goals[-1][1] != motion or goals[-1][1].name != motion.name:
                 goals.append((t, motion))
         elif rec.topic in outcome:
-            msg = rec.decode()
+            msg = _decode(path, rec)
             t = stamp_to_seconds(msg.header.stamp)
             outcome[rec.topic].append((t, msg))
             last_t = max(last_t, t)

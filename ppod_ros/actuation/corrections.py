@@ -4,28 +4,41 @@ The accelerometer feedback publishes corrections in the generator's command unit
 current phasors (A) per harmonic and actuator (DESIGN.md: only the waveform generator validates,
 limits and applies them). :func:`correct_table` adds one to a plan's feed-forward table:
 
-1. each entry's step from the correction now applied is clipped to ``limits.correction_step_a``
+1. rows at a forbidden frequency (outside ``limits.frequency_range_hz`` or inside an excluded band,
+   possible for rows 1..3 of a goal whose fundamental is not its lowest harmonic, or rows above the
+   band) get no correction at all: no current ever goes to a forbidden frequency;
+2. each entry's step from the correction now applied is clipped to ``limits.correction_step_a``
    (the magnitude is cut, the phase kept), or to ``limits.start_correction_a`` for a goal's
    starting correction;
-2. if the corrected table would exceed an actuator limit (peak current, I^2 R temperature,
-   amplifier voltage), the step is scaled back by bisection until it does not (if the correction
-   now applied no longer fits, e.g. carried over to a new goal, the whole correction is scaled);
-3. the result reports the table to send, the correction applied, whether steps were clipped and
-   which limit scaled them. Nothing past a limit is ever returned.
-
-Plate-motion limits (acceleration, contact margin, stroke) belong to the goal and were checked when
-it was planned: corrections steer the plate towards that goal.
+3. the corrected table must pass the whole envelope (:mod:`ppod_ros.actuation.envelope`: plate
+   acceleration, angular acceleration, contact margin, leg stroke, peak current, I^2 R temperature,
+   amplifier voltage, through the nominal plant) with the guard band :data:`CORRECTION_GUARD`; if it
+   would not, the step is scaled back by bisection until it does (if the correction now applied no
+   longer fits, e.g. carried over to a new goal, the whole correction is scaled);
+4. the result reports the table to send, the correction applied (learning continues from it, not
+   from what was asked), whether steps were clipped, which rows were blocked and which limit
+   scaled them. Nothing past a limit is ever returned.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from ppod_ros.actuation.envelope import LIMIT_ORDER, EnvelopeReport
 from ppod_ros.actuation.planning import GoalPlan, GoalPlanner, TablePrediction
 from ppod_ros.can.protocol import quantise_currents
 from ppod_ros.errors import ConfigError, LimitError
+
+#: Guard band of a corrected table under every limit (fraction of the limit's ratio): a corrected
+#: table uses at most 1 - CORRECTION_GUARD of each limit (or what the goal itself uses, if more), so
+#: that checkers with another sampling or model error (the device's own, an independent campaign)
+#: never see it over a limit.
+CORRECTION_GUARD = 0.005
+#: Bisection halvings when a step is scaled back (resolution 2^-10 of the step: 0.2 mA of a 0.2 A step).
+SCALE_BISECTIONS = 10
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,7 +47,9 @@ class CorrectionResult:
 
     ``currents_a = plan.currents_a + applied_a`` (quantised); ``step_clipped`` is true when some
     entry's step was cut to ``limits.correction_step_a``; ``limited_by`` names the limit that
-    forced the step to be scaled by ``scale`` < 1 (None when it was not).
+    forced the step to be scaled by ``scale`` < 1 (None when it was not); ``blocked_rows`` lists
+    the harmonics whose requested correction was dropped because they lie at a forbidden frequency;
+    ``envelope`` is the corrected table's :class:`~ppod_ros.actuation.envelope.EnvelopeReport`.
     """
 
     currents_a: np.ndarray
@@ -44,6 +59,8 @@ class CorrectionResult:
     limited_by: str | None
     scale: float
     prediction: TablePrediction
+    blocked_rows: tuple[int, ...] = ()
+    envelope: EnvelopeReport | None = None
 
 
 def correct_table(
@@ -82,44 +99,59 @@ def correct_table(
     target = np.zeros((K, 6), dtype=complex)
     target[kk - 1] = req
     prev = np.zeros((K, 6), dtype=complex) if previous is None else np.asarray(previous, dtype=complex)
-    if prev.shape != (K, 6):
-        raise ConfigError(f"previous: expected shape ({K}, 6), got {prev.shape}")
+    if prev.shape != (K, 6) or not np.all(np.isfinite(prev)):
+        raise ConfigError(f"previous: expected a finite table of shape ({K}, 6), got {prev.shape}")
+    envelope = planner.envelope
+    allowed = envelope.allowed_rows(plan.frequency_hz, K)
+    blocked = tuple(int(r) + 1 for r in np.flatnonzero(~allowed & np.any(target != 0, axis=1)))
+    target[~allowed] = 0.0
+    prev = np.where(allowed[:, None], prev, 0.0)
     step = target - prev
     lim = planner.config.limits
     cap = lim.correction_step_a if step_cap_a is None else min(float(step_cap_a), lim.start_correction_a)
     mag = np.abs(step)
     clipped = mag > cap
     step = np.where(clipped, step * cap / np.maximum(mag, 1e-300), step)
+    # Each limit may be used up to 1 - guard, or as far as the goal itself uses it (never beyond 1).
+    base_ratios = planner.plan_envelope(plan).ratios
+    allowed_ratio = {
+        name: min(1.0, max(1.0 - CORRECTION_GUARD, base_ratios.get(name, 0.0))) for name in LIMIT_ORDER
+    }
 
-    def attempt(base: np.ndarray, s: float) -> tuple[np.ndarray, TablePrediction, LimitError | None]:
+    def attempt(base: np.ndarray, s: float):
         table = quantise_currents(plan.currents_a + base + s * step)
-        pred = planner.predict(plan.frequency_hz, table)
-        try:
-            planner.check_table(pred)
-        except LimitError as exc:
-            return table, pred, exc
-        return table, pred, None
+        report = envelope.check_table(plan.frequency_hz, table)
+        over = [n for n in LIMIT_ORDER if report.ratios.get(n, 0.0) > allowed_ratio[n]]
+        return table, report, over
 
-    table, pred, err = attempt(prev, 1.0)
-    if err is None:
-        return CorrectionResult(table, table - plan.currents_a, target, bool(clipped.any()), None, 1.0, pred)
-    limited_by = err.limit
+    def result(table, report, limited_by, scale) -> CorrectionResult:
+        pred = planner.predict(plan.frequency_hz, table)
+        return CorrectionResult(
+            table, table - plan.currents_a, target, bool(clipped.any()), limited_by, scale, pred, blocked, report
+        )
+
+    table, report, over = attempt(prev, 1.0)
+    if not over:
+        return result(table, report, None, 1.0)
+    limited_by = over[0]
     base = prev
-    if attempt(prev, 0.0)[2] is not None:
+    if attempt(prev, 0.0)[2]:
         # The previous correction itself no longer fits (e.g. carried over to a new goal):
         # scale the whole correction from zero instead.
         base, step = np.zeros_like(prev), prev + step
     lo, hi = 0.0, 1.0
-    for _ in range(30):
+    for _ in range(SCALE_BISECTIONS):
         mid = 0.5 * (lo + hi)
-        if attempt(base, mid)[2] is None:
-            lo = mid
-        else:
+        if attempt(base, mid)[2]:
             hi = mid
-    table, pred, err = attempt(base, lo)
-    if err is not None:  # only possible if the plan's own table is over a limit
-        raise err
-    return CorrectionResult(table, table - plan.currents_a, target, bool(clipped.any()), limited_by, lo, pred)
+        else:
+            lo = mid
+    table, report, over = attempt(base, lo)
+    if over:  # only possible if the plan's own table is over a limit
+        raise report.error(1.0) or LimitError(
+            f"the goal's own table is over {over[0]}", limit=over[0], limit_value=math.nan, requested=math.nan
+        )
+    return result(table, report, limited_by, lo)
 
 
-__all__ = ["CorrectionResult", "correct_table"]
+__all__ = ["CORRECTION_GUARD", "CorrectionResult", "correct_table"]

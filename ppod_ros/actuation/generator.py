@@ -12,10 +12,18 @@ node, scripts, tests) and a :class:`~ppod_ros.can.host.DeviceLink`:
 * :meth:`stop`, :meth:`estop`, :meth:`reset_estop`, :meth:`ramp_down_and_disable`: the ways down.
 * :meth:`state` derives the generator's state from what the device reports (its STATUS frames),
   not from what was asked: ACTIVE only once the device plays the goal at full amplitude.
+
+Acknowledgements are used: a table the device answers INCOMPLETE, CHECKSUM or BAD_STATE (or does
+not answer within :data:`ACK_TIMEOUT_S`) is sent again, at most :data:`MAX_TABLE_RETRIES` times;
+then, and at once for OVER_LIMIT, the goal is reported REJECTED with the device's reason (a
+correction is dropped and the correction known to play is restored), never an endless RAMPING.
+Bus and protocol errors (:class:`~ppod_ros.errors.DeviceError`) never escape: a goal, correction or
+stop that cannot be sent is a not-accepted outcome naming the error.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 from dataclasses import dataclass, field
@@ -25,8 +33,9 @@ import numpy as np
 
 from ppod_ros.actuation.corrections import CorrectionResult
 from ppod_ros.actuation.planning import GoalPlan, GoalPlanner
+from ppod_ros.can.codec import TableAck
 from ppod_ros.can.host import DeviceLink
-from ppod_ros.can.protocol import DeviceState
+from ppod_ros.can.protocol import AckResult, DeviceState
 from ppod_ros.errors import ConfigError, DeviceError, LimitError
 from ppod_ros.motion import PlateMotion
 
@@ -70,12 +79,37 @@ class CorrectionOutcome:
     seq: int | None = None
 
 
+#: Sends of one table after the first when the device answers INCOMPLETE, CHECKSUM or BAD_STATE
+#: or does not answer (frames lost or corrupted on the bus): bounded, then the goal is rejected.
+MAX_TABLE_RETRIES = 2
+#: A committed table not acknowledged within this long (host clock, s) counts as lost. The device
+#: answers a commit within one firmware period (5 ms) when the frames arrive.
+ACK_TIMEOUT_S = 0.5
+#: Acknowledgements worth a retry (lost or corrupted frames, or the device was not enabled).
+RETRY_RESULTS = frozenset({AckResult.INCOMPLETE, AckResult.CHECKSUM, AckResult.BAD_STATE})
+
+
+@dataclass
+class _Pending:
+    """A table sent and not yet acknowledged: what it was, to send it again."""
+
+    currents_a: np.ndarray
+    frequency_hz: float
+    ramp_s: float
+    sent_at: float
+    correction_a: np.ndarray | None  # the correction this table carries (None: the goal table)
+    previous_a: np.ndarray | None  # the correction playing before it
+    attempts: int = 1
+
+
 @dataclass
 class _Active:
     plan: GoalPlan
     seqs: set[int] = field(default_factory=set)
     correction_a: np.ndarray | None = None  # applied correction (K, 6), A
     reached: bool = False  # the device has played it at full amplitude
+    last_seq: int | None = None  # the newest table sent for it: only that one is ever sent again
+    accepted: bool = False  # the device accepted one of its tables
 
 
 class WaveformGenerator:
@@ -95,7 +129,13 @@ class WaveformGenerator:
         self._lock = threading.RLock()
         self._active: _Active | None = None
         self._stop_seq: int | None = None
+        self._pending: dict[int, _Pending] = {}
+        self._failed: GoalOutcome | None = None
         self.last_rejection: GoalOutcome | None = None
+        #: Counts of what the acknowledgements led to (retries, rejections, by reason).
+        self.ack_counters: dict[str, int] = {}
+        self.last_correction_note = ""
+        link.on_ack.append(self._on_ack)
 
     # ------------------------------------------------------------------ goals
     def submit(self, motion: PlateMotion, dry_run: bool = False) -> GoalOutcome:
@@ -115,10 +155,18 @@ class WaveformGenerator:
                                              f"({', '.join(self.link.status.fault_names) or 'no fault flags'})")
                 self.last_rejection = outcome
                 return outcome
-            if state not in (DeviceState.ENABLED, DeviceState.RAMPING):
-                self.link.enable()  # disabled, after a watchdog trip, or not reported yet
-            seq = self.link.send_plan(plan)
-            self._active = _Active(plan, {seq}, np.zeros_like(plan.currents_a))
+            try:
+                if state not in (DeviceState.ENABLED, DeviceState.RAMPING):
+                    self.link.enable()  # disabled, after a watchdog trip, or not reported yet
+                seq = self.link.send_plan(plan)
+            except DeviceError as exc:  # bus-off, a refused frame: nothing (more) is played
+                outcome = GoalOutcome(False, f"goal not sent: {exc}")
+                self.last_rejection = outcome
+                return outcome
+            self._active = _Active(plan, {seq}, np.zeros_like(plan.currents_a), last_seq=seq)
+            self._pending = {seq: _Pending(plan.currents_a, plan.frequency_hz, plan.ramp_s, self.link.clock(),
+                                           None, None)}
+            self._failed = None
             self._stop_seq = None
         return GoalOutcome(True, plan=plan, seq=seq)
 
@@ -160,21 +208,32 @@ class WaveformGenerator:
             target = table if absolute else act.correction_a[k - 1] + table
             first = start and not np.any(act.correction_a)
             cap = self.config.limits.start_correction_a if first else None
+            if not np.all(np.isfinite(table)):
+                return CorrectionOutcome(False, "correction must be finite")
             try:
                 result = self.planner.correct(act.plan, target, previous=act.correction_a, k=k, step_cap_a=cap)
             except (ConfigError, LimitError) as exc:
                 return CorrectionOutcome(False, str(exc))
-            ramp = max(act.plan.ramp_s, self.config.timing.min_ramp_s) if first else None
-            seq = self.link.send_correction(act.plan, result, ramp_s=ramp)
+            ramp = max(act.plan.ramp_s, self.config.timing.min_ramp_s) if first else self.config.timing.min_ramp_s
+            try:
+                seq = self.link.send_correction(act.plan, result, ramp_s=ramp)
+            except DeviceError as exc:
+                return CorrectionOutcome(False, f"correction not sent: {exc}", result)
+            self._pending[seq] = _Pending(result.currents_a, act.plan.frequency_hz, ramp, self.link.clock(),
+                                          result.applied_a, act.correction_a)
             act.seqs.add(seq)
+            act.last_seq = seq
             act.correction_a = result.applied_a
             notes = []
+            if result.blocked_rows:
+                notes.append(f"no correction at harmonics {list(result.blocked_rows)} (forbidden frequencies)")
             if result.step_clipped:
                 name = "start_correction_a" if first else "correction_step_a"
                 notes.append(f"step clipped to limits.{name} = {getattr(self.config.limits, name):g} A")
             if result.limited_by:
                 notes.append(f"scaled by {result.scale:.3f} to stay within {result.limited_by}")
-            return CorrectionOutcome(True, "; ".join(notes), result, seq)
+            self.last_correction_note = "; ".join(notes)
+            return CorrectionOutcome(True, self.last_correction_note, result, seq)
 
     # ------------------------------------------------------------------ the ways down
     def stop(self, ramp_s: float | None = None) -> int:
@@ -182,13 +241,20 @@ class WaveformGenerator:
         with self._lock:
             freq = None if self._active is None else self._active.plan.frequency_hz
             self._active = None
-            self._stop_seq = self.link.stop_motion(ramp_s, freq)
+            self._pending.clear()
+            self._failed = None
+            ramp = self.config.timing.default_ramp_s if ramp_s is None else ramp_s
+            self._stop_seq = self.link.stop_motion(ramp, freq)
+            self._pending[self._stop_seq] = _Pending(np.zeros((1, 6), complex), freq or
+                                                     self.config.sim.idle_frequency_hz, ramp,
+                                                     self.link.clock(), None, None)
             return self._stop_seq
 
     def estop(self) -> None:
         """Emergency stop: the top-priority frame; the device latches ESTOP."""
         with self._lock:
             self._active = None
+            self._pending.clear()
             self.link.estop()
 
     def reset_estop(self) -> None:
@@ -229,15 +295,96 @@ class WaveformGenerator:
         except DeviceError:
             return False
 
+    # ------------------------------------------------------------------ acknowledgements
+    def _count(self, key: str) -> None:
+        self.ack_counters[key] = self.ack_counters.get(key, 0) + 1
+
+    def _on_ack(self, ack: TableAck) -> None:
+        """The device's answer to a commit (called by the link's receiving thread)."""
+        with self._lock:
+            pending = self._pending.get(ack.seq)
+            if pending is None:
+                return
+            if ack.result in (AckResult.ACCEPTED, AckResult.ACTIVE, AckResult.SUPERSEDED):
+                del self._pending[ack.seq]
+                if self._active is not None and ack.seq in self._active.seqs and ack.result != AckResult.SUPERSEDED:
+                    self._active.accepted = True
+                return
+            self._count(f"ack_{ack.result.name.lower()}")
+            self._retry_or_reject(ack.seq, pending, f"device answered {ack.result.name}",
+                                  retry=ack.result in RETRY_RESULTS)
+
+    def check_acks(self) -> None:
+        """Treat tables unacknowledged for ACK_TIMEOUT_S as lost (call periodically; state() does)."""
+        now = self.link.clock()
+        with self._lock:
+            for seq, pending in list(self._pending.items()):
+                if now - pending.sent_at > ACK_TIMEOUT_S:
+                    self._count("ack_timeout")
+                    self._retry_or_reject(seq, pending, f"no acknowledgement within {ACK_TIMEOUT_S:g} s",
+                                          retry=True)
+
+    def _retry_or_reject(self, seq: int, pending: _Pending, why: str, retry: bool) -> None:
+        del self._pending[seq]
+        act = self._active
+        stopping = act is None and seq == self._stop_seq
+        if not stopping and (act is None or seq not in act.seqs):
+            return
+        if not stopping and seq != act.last_seq:
+            # A newer table of this goal was sent since (it carries the goal and the newer
+            # correction): sending this one again would undo it.
+            self._count("superseded_by_newer")
+            return
+        if retry and pending.attempts <= MAX_TABLE_RETRIES:
+            try:
+                if self.link.status.state not in (DeviceState.ENABLED, DeviceState.RAMPING):
+                    self.link.enable()
+                new = self.link.send_table(pending.currents_a, pending.frequency_hz, pending.ramp_s)
+            except DeviceError as exc:
+                why = f"{why}; resend failed: {exc}"
+            else:
+                self._count("retries")
+                pending.attempts += 1
+                pending.sent_at = self.link.clock()
+                self._pending[new] = pending
+                if stopping:
+                    self._stop_seq = new
+                else:
+                    act.seqs.add(new)
+                    act.last_seq = new
+                return
+        if stopping:
+            # The stop table did not get through: disabling ramps the plate down as well.
+            self._count("stops_disabled")
+            # If even that cannot be sent, the device's watchdog ramps it down when heartbeats stop.
+            with contextlib.suppress(DeviceError):
+                self.link.disable()
+            return
+        if pending.correction_a is not None and act.accepted:
+            # A correction that did not reach the device: what plays is the one before it.
+            self._count("corrections_dropped")
+            if np.array_equal(act.correction_a, pending.correction_a):
+                act.correction_a = pending.previous_a
+            self.last_correction_note = f"correction table {seq} not played: {why}"
+            return
+        self._count("goals_rejected")
+        self._failed = GoalOutcome(False, f"goal '{act.plan.motion.name}' not played: {why} "
+                                          f"(after {pending.attempts} send(s) of its table)")
+        self.last_rejection = self._failed
+        self._active = None
+
     # ------------------------------------------------------------------ state
     def state(self) -> tuple[GeneratorState, str, float]:
         """(state, reason, ramp progress 0..1) from the device's last STATUS."""
+        self.check_acks()
         s = self.link.status
         with self._lock:
             if s.state in (DeviceState.ESTOP, DeviceState.FAULT, DeviceState.WATCHDOG):
                 faults = ", ".join(s.fault_names)
                 return GeneratorState.FAULT, f"device {s.state.name}{': ' + faults if faults else ''}", 0.0
             act = self._active
+            if act is None and self._failed is not None:
+                return GeneratorState.REJECTED, self._failed.reason, 0.0
             if act is None:
                 if self._stop_seq is not None and not self.at_rest():
                     return GeneratorState.STOPPING, "ramping down", float(s.amplitude_scale)

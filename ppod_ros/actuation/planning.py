@@ -28,12 +28,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ppod_ros.actuation.harmonics import cycle_phases, peak_abs, rms
+from ppod_ros.actuation.envelope import Envelope, EnvelopeReport, motion_extremes, table_peak
+from ppod_ros.actuation.harmonics import rms
 from ppod_ros.actuation.plant import NominalPlant
-from ppod_ros.can.protocol import quantise_currents, quantise_frequency
+from ppod_ros.can.protocol import MAX_RAMP_S, quantise_currents, quantise_frequency
 from ppod_ros.device.config import DeviceConfig
 from ppod_ros.errors import ConfigError, LimitError
-from ppod_ros.kinematics.stewart import LegTrajectory, leg_trajectory, motion_samples_per_cycle
+from ppod_ros.kinematics.stewart import LegTrajectory, leg_trajectory
 from ppod_ros.motion import GRAVITY_MPS2, PlateMotion
 
 if TYPE_CHECKING:
@@ -63,12 +64,11 @@ def table_size(top_harmonic: int, max_harmonic: int, frequency_hz: float | None 
 
 
 def plate_peaks(motion: PlateMotion) -> tuple[float, float]:
-    """Peak |p''| (m/s^2) and peak |alpha| (rad/s^2) over one cycle, sampled densely."""
+    """Peak |p''| (m/s^2) and peak |alpha| (rad/s^2) over one cycle (refined extrema, envelope module)."""
     if motion.is_zero():
         return 0.0, 0.0
-    t = cycle_phases(motion_samples_per_cycle(motion, 1)) / motion.omega
-    u = motion.acceleration(t)
-    return float(np.max(np.linalg.norm(u[:, :3], axis=1))), float(np.max(np.linalg.norm(u[:, 3:], axis=1)))
+    acc, ang, _ = motion_extremes(motion.phasors(), motion.k, 0.0)
+    return acc, ang
 
 
 def contact_margin(motion: PlateMotion, radius_m: float) -> float:
@@ -79,9 +79,7 @@ def contact_margin(motion: PlateMotion, radius_m: float) -> float:
     """
     if motion.is_zero():
         return GRAVITY_MPS2
-    t = cycle_phases(motion_samples_per_cycle(motion, 1)) / motion.omega
-    u = motion.acceleration(t)
-    return float(GRAVITY_MPS2 + np.min(u[:, 2] - radius_m * np.hypot(u[:, 3], u[:, 4])))
+    return motion_extremes(motion.phasors(), motion.k, radius_m)[2]
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,6 +162,9 @@ class GoalPlanner:
         self.config = config
         self.plant = plant if plant is not None else NominalPlant(config)
         self.kinematics = self.plant.kinematics
+        #: The one envelope checker (ppod_ros.actuation.envelope) every corrected table passes.
+        self.envelope = Envelope(config, self.plant)
+        self._plan_envelope: tuple[GoalPlan, EnvelopeReport] | None = None
 
     # ------------------------------------------------------------------ goals
     def plan_arrays(
@@ -236,7 +237,10 @@ class GoalPlanner:
                 requested=top,
             )
         self._check_frequencies(motion.frequency_hz, active.k)
-        acc_peak, ang_peak = plate_peaks(active)
+        if active.is_zero():
+            acc_peak, ang_peak, margin = 0.0, 0.0, GRAVITY_MPS2
+        else:
+            acc_peak, ang_peak, margin = motion_extremes(active.phasors(), active.k, lim.working_radius_m)
         if acc_peak > lim.plate_accel_mps2:
             raise _limit(
                 "limits.plate_accel_mps2", lim.plate_accel_mps2, acc_peak, "peak plate acceleration", "m/s^2"
@@ -249,7 +253,6 @@ class GoalPlanner:
                 "peak angular acceleration",
                 "rad/s^2",
             )
-        margin = contact_margin(active, lim.working_radius_m)
         if margin < lim.contact_margin_mps2:
             raise LimitError(
                 f"contact margin min(g + a_n) = {margin:.4g} m/s^2 over the working disc (r = "
@@ -261,7 +264,7 @@ class GoalPlanner:
             )
         kt = table_size(top, lim.max_harmonic, motion.frequency_hz, lim)
         legs = leg_trajectory(self.kinematics, active, kmax=2 * max(top, 1))
-        stroke = float(np.max(legs.peak_m))
+        stroke = float(np.max(self.envelope.exact_stroke(active, legs))) if top else 0.0
         if stroke > lim.leg_stroke_m:
             raise _limit("limits.leg_stroke_m", lim.leg_stroke_m, stroke, "peak leg displacement", "m")
         freq = quantise_frequency(motion.frequency_hz)
@@ -269,9 +272,21 @@ class GoalPlanner:
             self.plant.feedforward(active, kt) if top else np.zeros((kt, 6), complex)
         )
         prediction = self.predict(freq, currents)
+        # The nominal plant's linear legs can exceed the exact inverse kinematics by the second-order
+        # terms: the envelope takes the larger, for goals as for corrected tables.
+        linear = float(np.max(prediction.stroke_peak_m))
+        if linear > lim.leg_stroke_m:
+            raise _limit("limits.leg_stroke_m", lim.leg_stroke_m, linear, "peak leg displacement (linear model)", "m")
         self.check_table(prediction)
         ramp = motion.ramp_time_s if motion.ramp_time_s is not None else self.config.timing.default_ramp_s
         ramp = max(float(ramp), self.config.timing.min_ramp_s)
+        if ramp > MAX_RAMP_S:
+            raise LimitError(
+                f"ramp_time_s {ramp:g} s does not fit the CAN protocol's ramp field (at most {MAX_RAMP_S:g} s)",
+                limit="protocol.max_ramp_s",
+                limit_value=MAX_RAMP_S,
+                requested=ramp,
+            )
         return GoalPlan(motion, freq, ramp, currents, prediction, legs, acc_peak, ang_peak, margin)
 
     def _check_frequencies(self, frequency_hz: float, k: np.ndarray) -> None:
@@ -327,11 +342,11 @@ class GoalPlanner:
         return TablePrediction(
             frequency_hz,
             currents,
-            peak_abs(currents, k),
+            table_peak(currents, k),
             i_rms,
             temp,
-            peak_abs(volts, k),
-            peak_abs(legs, k),
+            table_peak(volts, k),
+            table_peak(legs, k),
             accel,
         )
 
@@ -366,6 +381,15 @@ class GoalPlanner:
                 f"peak voltage of amplifier {worst}",
                 "V",
             )
+
+    def plan_envelope(self, plan: GoalPlan) -> EnvelopeReport:
+        """The envelope report of a plan's own table (kept for the plan last asked about)."""
+        cached = self._plan_envelope
+        if cached is not None and cached[0] is plan:
+            return cached[1]
+        report = self.envelope.check_table(plan.frequency_hz, plan.currents_a)
+        self._plan_envelope = (plan, report)
+        return report
 
     # ------------------------------------------------------------------ corrections
     def correct(

@@ -24,6 +24,7 @@ from ppod_ros.can.commands import (
     Heartbeat,
     RawRequest,
     TableCommit,
+    TableCrc,
     TableEntry,
     TableHeader,
     VersionRequest,
@@ -46,6 +47,7 @@ from ppod_ros.can.protocol import (
 from ppod_ros.can.reports import (
     CoilRms,
     CoilTemps,
+    DeviceLimit,
     FaultEvent,
     RawData,
     RawHeader,
@@ -171,10 +173,19 @@ def table_checksum(entries: list[TableEntry]) -> int:
     return binascii.crc_hqx(data, 0xFFFF)
 
 
+def table_crc(header: TableHeader, entries: list[TableEntry]) -> int:
+    """TABLE_CRC's CRC-16/CCITT (init 0xFFFF): the header's 8 payload bytes, then the entries' bytes
+    1..7 sorted by (k, actuator). Covers frequency, ramp, entry count and sequence number."""
+    data = header._payload() + b"".join(
+        e.checksum_bytes() for e in sorted(entries, key=lambda e: (e.k, e.actuator))
+    )
+    return binascii.crc_hqx(data, 0xFFFF)
+
+
 def encode_table(
     seq: int, frequency_hz: float, ramp_s: float, currents: np.ndarray, node: int
 ) -> list[can.Message]:
-    """Frames that load and commit a current table: header, non-zero entries, commit.
+    """Frames that load and commit a current table: header, non-zero entries, TABLE_CRC, commit.
 
     Parameters
     ----------
@@ -194,14 +205,16 @@ def encode_table(
             if round(c.real / CURRENT_LSB_A) or round(c.imag / CURRENT_LSB_A):
                 entries.append(TableEntry(seq, a, k, c))
     header = TableHeader(seq, len(entries), frequency_hz, ramp_s)
+    crc = TableCrc(seq, len(entries), table_crc(header, entries))
     commit = TableCommit(seq, len(entries), table_checksum(entries))
-    return [header.encode(node)] + [e.encode(node) for e in entries] + [commit.encode(node)]
+    return [header.encode(node)] + [e.encode(node) for e in entries] + [crc.encode(node), commit.encode(node)]
 
 
 __all__ = [
     "Control",
     "CoilRms",
     "CoilTemps",
+    "DeviceLimit",
     "Estop",
     "FaultEvent",
     "FrameCounters",
@@ -217,6 +230,7 @@ __all__ = [
     "SummaryHeader",
     "TableAck",
     "TableCommit",
+    "TableCrc",
     "TableEntry",
     "TableHeader",
     "Version",
@@ -225,4 +239,5 @@ __all__ = [
     "encode_summary",
     "encode_table",
     "table_checksum",
+    "table_crc",
 ]

@@ -6,7 +6,7 @@ import struct
 from dataclasses import dataclass
 from typing import ClassVar
 
-from ppod_ros.can.packing import Record, check_int, complex24, err, from_complex24, scaled
+from ppod_ros.can.packing import Field, Record, check_int, complex24, err, from_complex24, scaled
 from ppod_ros.can.protocol import (
     CURRENT_LSB_A,
     FREQUENCY_LSB_HZ,
@@ -158,6 +158,39 @@ class TableCommit(Record):
 
 
 @dataclass(frozen=True)
+class TableCrc(Record):
+    """CRC-16/CCITT (init 0xFFFF) over a table's TABLE_HEADER payload (8 bytes) followed by every
+    entry's bytes 1..7 sorted by (k, actuator): protects the header as well as the entries.
+    Sent after the last entry and before the commit; a 2.0 device commits no table without it."""
+
+    FN: ClassVar[Fn] = Fn.TABLE_CRC
+    LENGTH: ClassVar[int] = 4
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        Field("seq", 0, 1),
+        Field("n_entries", 1, 1),
+        Field("crc", 2, 2),
+    )
+    seq: int
+    n_entries: int
+    crc: int
+
+    def _payload(self) -> bytes:
+        return struct.pack(
+            "<BBH",
+            check_int(self.seq, 0, 255, "seq"),
+            check_int(self.n_entries, 0, NUM_ACTUATORS * MAX_TABLE_HARMONIC, "n_entries"),
+            check_int(self.crc, 0, 0xFFFF, "crc"),
+        )
+
+    @classmethod
+    def _parse(cls, d: bytes) -> TableCrc:
+        seq, n, crc = struct.unpack("<BBH", d)
+        if n > NUM_ACTUATORS * MAX_TABLE_HARMONIC:
+            raise err("out of range", f"table crc n_entries {n}")
+        return cls(seq, n, crc)
+
+
+@dataclass(frozen=True)
 class VersionRequest(Record):
     FN: ClassVar[Fn] = Fn.VERSION_REQUEST
     LENGTH: ClassVar[int] = 3
@@ -211,6 +244,7 @@ __all__ = [
     "Heartbeat",
     "RawRequest",
     "TableCommit",
+    "TableCrc",
     "TableEntry",
     "TableHeader",
     "VersionRequest",

@@ -39,6 +39,7 @@ from ppod_ros.can.codec import (
     CoilRms,
     CoilTemps,
     Control,
+    DeviceLimit,
     Estop,
     FaultEvent,
     FrameCounters,
@@ -56,9 +57,18 @@ from ppod_ros.can.codec import (
     VersionRequest,
     encode_table,
 )
-from ppod_ros.can.protocol import PROTOCOL_VERSION, AckResult, Command, DeviceState, Fault, quantise_frequency
-from ppod_ros.device.config import DeviceConfig
-from ppod_ros.errors import DeviceError
+from ppod_ros.can.protocol import (
+    LIMIT_LSB,
+    PROTOCOL_VERSION,
+    AckResult,
+    Command,
+    DeviceState,
+    Fault,
+    LimitItem,
+    quantise_frequency,
+)
+from ppod_ros.device.config import DeviceConfig, Limits
+from ppod_ros.errors import ConfigError, DeviceError
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +76,42 @@ log = logging.getLogger(__name__)
 def send_estop(bus: can.BusABC, node_id: int, reason: int = 0) -> None:
     """Write the emergency-stop frame straight to the bus (no handshake, no state): ``ppod estop``."""
     bus.send(Estop(reason).encode(node_id))
+
+
+_SCALAR_LIMITS = {
+    LimitItem.LEG_STROKE_M: ("leg_stroke_m", "m"),
+    LimitItem.COIL_CURRENT_A: ("coil_current_a", "A"),
+    LimitItem.AMPLIFIER_VOLTAGE_V: ("amplifier_voltage_v", "V"),
+    LimitItem.COIL_TEMPERATURE_C: ("coil_temperature_c", "degC"),
+    LimitItem.PLATE_ACCEL_MPS2: ("plate_accel_mps2", "m/s^2"),
+    LimitItem.PLATE_ANGULAR_ACCEL_RADPS2: ("plate_angular_accel_radps2", "rad/s^2"),
+}
+
+
+def limits_beyond_device(limits: Limits, reported: list[float]) -> list[str]:
+    """Where the host's ``limits`` exceed the device's own (DEVICE_LIMIT values by LimitItem).
+
+    Returns one message per violation (empty: the description fits the device). A host limit may
+    be tighter than the device's, never looser; the host's excluded bands must cover the device's.
+    """
+    tol = LIMIT_LSB  # the values are rounded to 1e-6 on the wire
+    out = []
+    if len(reported) < LimitItem.EXCLUDED_BAND or (len(reported) - LimitItem.EXCLUDED_BAND) % 2:
+        return [f"the device reported {len(reported)} limits, not a whole set"]
+    for item, (name, unit) in _SCALAR_LIMITS.items():
+        mine, theirs = getattr(limits, name), reported[item]
+        if mine > theirs + tol:
+            out.append(f"limits.{name} = {mine:g} {unit} exceeds the device's own {theirs:g} {unit}")
+    lo, hi = limits.frequency_range_hz
+    d_lo, d_hi = reported[LimitItem.FREQUENCY_MIN_HZ], reported[LimitItem.FREQUENCY_MAX_HZ]
+    if lo < d_lo - tol or hi > d_hi + tol:
+        out.append(f"limits.frequency_range_hz = [{lo:g}, {hi:g}] Hz exceeds the device's own [{d_lo:g}, {d_hi:g}] Hz")
+    bands = reported[LimitItem.EXCLUDED_BAND:]
+    for b_lo, b_hi in zip(bands[0::2], bands[1::2], strict=True):
+        covered = any(h_lo <= b_lo + tol and h_hi >= b_hi - tol for h_lo, h_hi in limits.excluded_bands_hz)
+        if not covered and b_hi >= lo and b_lo <= hi:
+            out.append(f"limits.excluded_bands_hz does not cover the device's excluded band [{b_lo:g}, {b_hi:g}] Hz")
+    return out
 
 
 def fault_names(flags: int) -> list[str]:
@@ -129,6 +175,9 @@ class DeviceLink:
         self.counters = LinkCounters(FrameCounters(self.node, "to_host"))
         self.status = DeviceSnapshot()
         self.version: Version | None = None
+        #: The device's own limits from its DEVICE_LIMIT frames, by LimitItem number (handshake).
+        self.device_limits: dict[int, float] = {}
+        self._device_limit_count = 0
         self.summaries: deque[AccelSummary] = deque(maxlen=64)
         self.captures: deque[RawCapture] = deque(maxlen=4)
         self.acks: dict[int, list[TableAck]] = {}
@@ -243,12 +292,24 @@ class DeviceLink:
     def request_raw(self, channel_mask: int, n_cycles: int, capture_id: int = 0) -> None:
         self._send(RawRequest(capture_id, channel_mask, n_cycles).encode(self.node))
 
+    def _limits_complete(self) -> bool:
+        n = self._device_limit_count
+        return n > 0 and all(i in self.device_limits for i in range(n))
+
     def handshake(self, timeout_s: float = 1.0) -> Version:
-        """Exchange protocol versions; raises DeviceError on timeout or an incompatible major version."""
+        """Exchange protocol versions and check the configuration against the device's own limits.
+
+        Raises DeviceError on timeout or an incompatible major version, ConfigError when the device
+        description's limits exceed the limits the device reports (DEVICE_LIMIT frames).
+        """
         self.version = None
+        self.device_limits, self._device_limit_count = {}, 0
         self._send(VersionRequest(*PROTOCOL_VERSION, self.host_node).encode(self.node))
-        if not self.wait_for(lambda: self.version is not None, timeout_s):
-            raise DeviceError(f"no VERSION reply from device node {self.node} within {timeout_s:g} s")
+        if not self.wait_for(lambda: self.version is not None and (
+                self.version.major != PROTOCOL_VERSION[0] or self._limits_complete()), timeout_s):
+            if self.version is None:
+                raise DeviceError(f"no VERSION reply from device node {self.node} within {timeout_s:g} s")
+            raise DeviceError(f"device node {self.node} did not report all its limits within {timeout_s:g} s")
         v = self.version
         if v.major != PROTOCOL_VERSION[0]:
             raise DeviceError(
@@ -259,6 +320,13 @@ class DeviceLink:
             raise DeviceError(
                 f"device reports {v.n_channels} accelerometer channels, the configuration has "
                 f"{self.n_channels}"
+            )
+        reported = [self.device_limits[i] for i in range(self._device_limit_count)]
+        problems = limits_beyond_device(self.config.limits, reported)
+        if problems:
+            raise ConfigError(
+                f"device description {self.config.source or self.config.name!r} is not safe for device node "
+                f"{self.node}: " + "; ".join(problems)
             )
         return v
 
@@ -323,6 +391,9 @@ class DeviceLink:
                 cb(rec)
         elif isinstance(rec, Version):
             self.version = rec
+        elif isinstance(rec, DeviceLimit):
+            self.device_limits[rec.item] = rec.value
+            self._device_limit_count = rec.count
         elif isinstance(rec, SummaryHeader):
             self._summary_header(rec)
         elif isinstance(rec, SummaryData):
@@ -477,4 +548,4 @@ class DeviceLink:
         self._thread = None
 
 
-__all__ = ["DeviceLink", "DeviceSnapshot", "LinkCounters", "fault_names", "send_estop"]
+__all__ = ["DeviceLink", "DeviceSnapshot", "LinkCounters", "fault_names", "limits_beyond_device", "send_estop"]

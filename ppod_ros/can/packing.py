@@ -69,11 +69,32 @@ def device_state(value: int) -> DeviceState:
 
 
 @dataclass(frozen=True)
+class Field:
+    """One signal of a frame's payload, for generators (a DBC file) and independent decoders.
+
+    ``offset`` and ``size`` in bytes (little-endian), ``signed`` two's complement, physical value =
+    raw x ``scale`` in ``unit``.
+    """
+
+    name: str
+    offset: int
+    size: int
+    signed: bool = False
+    scale: float = 1.0
+    unit: str = ""
+
+
+@dataclass(frozen=True)
 class Record:
-    """Base of all frame records; subclasses define FN, LENGTH, ``_payload`` and ``_parse``."""
+    """Base of all frame records; subclasses define FN, LENGTH, ``_payload`` and ``_parse``.
+
+    ``FIELDS`` declares the payload layout (name, offset, size, signedness, scale), where a record
+    states it; the codec's ``RECORDS`` registry maps every function code to its record.
+    """
 
     FN: ClassVar[Fn]
     LENGTH: ClassVar[int]
+    FIELDS: ClassVar[tuple[Field, ...]] = ()
 
     def _payload(self) -> bytes:
         raise NotImplementedError
@@ -88,6 +109,7 @@ class Record:
 
 
 __all__ = [
+    "Field",
     "Record",
     "check_int",
     "complex24",

@@ -1,4 +1,4 @@
-"""The PPOD CAN protocol, version 1.0: identifiers, enumerations, scalings and frame timing.
+"""The PPOD CAN protocol, version 2.0: identifiers, enumerations, scalings and frame timing.
 
 docs/can_protocol.md is the normative description; this module is its machine-readable half.
 Classic CAN, 11-bit identifiers, little-endian payloads. An identifier is ``function << 4 | node``:
@@ -16,7 +16,9 @@ import numpy as np
 
 from ppod_ros.errors import ProtocolError
 
-PROTOCOL_VERSION = (1, 0)
+#: 2.0: TABLE_CRC protects a table's header and entries (required before a commit) and the device
+#: reports its own limits (DEVICE_LIMIT) with VERSION. 1.0 devices and hosts are refused.
+PROTOCOL_VERSION = (2, 0)
 BROADCAST_NODE = 0
 MAX_NODE = 15
 NUM_ACTUATORS = 6
@@ -51,6 +53,8 @@ class Fn(IntEnum):
     RAW_REQUEST = 16  # host -> device: capture raw samples (bounded)
     RAW_HEADER = 17  # device -> host: raw capture timing
     RAW_DATA = 18  # device -> host: three consecutive samples of one channel
+    TABLE_CRC = 19  # host -> device: CRC-16 over a table's header and entries, before its commit (2.0)
+    DEVICE_LIMIT = 20  # device -> host: one of the device's own limits, after VERSION (2.0)
 
 
 HOST_TO_DEVICE = frozenset(
@@ -63,6 +67,7 @@ HOST_TO_DEVICE = frozenset(
         Fn.TABLE_COMMIT,
         Fn.VERSION_REQUEST,
         Fn.RAW_REQUEST,
+        Fn.TABLE_CRC,
     }
 )
 DEVICE_TO_HOST = frozenset(set(Fn) - HOST_TO_DEVICE)
@@ -104,12 +109,27 @@ class Fault(IntFlag):
 STOPPING_FAULTS = Fault.THERMAL | Fault.VOLTAGE | Fault.STROKE | Fault.OVER_CURRENT
 
 
+class LimitItem(IntEnum):
+    """The device limits a DEVICE_LIMIT frame carries (value in 1e-6 of the SI unit)."""
+
+    LEG_STROKE_M = 0
+    COIL_CURRENT_A = 1
+    AMPLIFIER_VOLTAGE_V = 2
+    COIL_TEMPERATURE_C = 3
+    PLATE_ACCEL_MPS2 = 4
+    PLATE_ANGULAR_ACCEL_RADPS2 = 5
+    FREQUENCY_MIN_HZ = 6
+    FREQUENCY_MAX_HZ = 7
+    #: Excluded bands follow as pairs: item 8 + 2 i is band i's lower edge, 9 + 2 i its upper edge.
+    EXCLUDED_BAND = 8
+
+
 class AckResult(IntEnum):
     ACCEPTED = 0  # complete and valid; becomes active at the next cycle start
     ACTIVE = 1  # now playing (cycle_index: the first cycle that plays it)
-    INCOMPLETE = 2  # entries missing or duplicated, or no header for this sequence number
-    CHECKSUM = 3  # entries received, checksum mismatch
-    OVER_LIMIT = 4  # the device's own limit check failed (peak current, harmonic, frequency)
+    INCOMPLETE = 2  # entries missing or duplicated, no header or no TABLE_CRC for this sequence number
+    CHECKSUM = 3  # entries received, checksum (entries) or TABLE_CRC (header and entries) mismatch
+    OVER_LIMIT = 4  # the device's own limit check failed (band, excluded bands, peak current, stroke)
     BAD_STATE = 5  # not enabled (disabled, watchdog, e-stop, fault)
     SUPERSEDED = 6  # a newer commit replaced this one before it became active
 
@@ -121,6 +141,8 @@ RAW_LSB_MPS2 = 2.0**-9  # raw samples: int16, +-64 m/s^2
 FREQUENCY_LSB_HZ = 1e-6  # uint32 micro-hertz
 RAMP_LSB_S = 1e-3  # uint16 milliseconds
 TIME_LSB_S = 1e-3  # uint32 milliseconds of device time
+LIMIT_LSB = 1e-6  # DEVICE_LIMIT values: uint32 micro-units of the limit's SI unit
+MAX_RAMP_S = 0xFFFF * RAMP_LSB_S  # the u16 ramp field of TABLE_HEADER and CONTROL: 65.535 s
 HEARTBEAT_AGE_LSB_S = 2e-3  # uint8; 255 = 510 ms or more, or never
 COIL_RMS_LSB_A = 0.05  # uint8
 INT24_MAX = 2**23 - 1
@@ -186,7 +208,10 @@ __all__ = [
     "Fault",
     "Fn",
     "HOST_TO_DEVICE",
+    "LIMIT_LSB",
+    "LimitItem",
     "MAX_CHANNELS",
+    "MAX_RAMP_S",
     "MAX_RAW_CYCLES",
     "MAX_RAW_SAMPLES",
     "MAX_SUMMARY_CYCLES",

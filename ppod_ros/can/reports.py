@@ -7,11 +7,12 @@ import struct
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from ppod_ros.can.packing import Record, check_int, complex24, device_state, err, from_complex24, scaled, u24
+from ppod_ros.can.packing import Field, Record, check_int, complex24, device_state, err, from_complex24, scaled, u24
 from ppod_ros.can.protocol import (
     COIL_RMS_LSB_A,
     CYCLE_MODULUS,
     HEARTBEAT_AGE_LSB_S,
+    LIMIT_LSB,
     MAX_CHANNELS,
     MAX_RAW_CYCLES,
     MAX_RAW_SAMPLES,
@@ -151,6 +152,38 @@ class CoilRms(Record):
     @classmethod
     def _parse(cls, d: bytes) -> CoilRms:
         return cls(tuple(b * COIL_RMS_LSB_A for b in d))
+
+
+@dataclass(frozen=True)
+class DeviceLimit(Record):
+    """One of the device's own limits (``item``: a LimitItem number, ``count`` items in all), sent
+    after VERSION: the host refuses a device description whose limits exceed these."""
+
+    FN: ClassVar[Fn] = Fn.DEVICE_LIMIT
+    LENGTH: ClassVar[int] = 6
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        Field("item", 0, 1),
+        Field("count", 1, 1),
+        Field("value", 2, 4, scale=LIMIT_LSB, unit="SI unit of the item"),
+    )
+    item: int
+    count: int
+    value: float
+
+    def _payload(self) -> bytes:
+        return struct.pack(
+            "<BBI",
+            check_int(self.item, 0, 255, "item"),
+            check_int(self.count, 1, 255, "count"),
+            scaled(self.value, LIMIT_LSB, 0, 0xFFFFFFFF, "value"),
+        )
+
+    @classmethod
+    def _parse(cls, d: bytes) -> DeviceLimit:
+        item, count, value = struct.unpack("<BBI", d)
+        if count == 0 or item >= count:
+            raise err("out of range", f"device limit item {item} of {count}")
+        return cls(item, count, value * LIMIT_LSB)
 
 
 @dataclass(frozen=True)
@@ -300,6 +333,7 @@ class RawData(Record):
 
 
 __all__ = [
+    "DeviceLimit",
     "CoilRms",
     "CoilTemps",
     "FaultEvent",

@@ -4,11 +4,19 @@ The public file formats (docs/formats.md) are validated strictly: an unknown key
 non-finite number is an error that names the key, with its full path (``harmonics[1].amplitude``).
 :class:`Fields` wraps one mapping; each accessor consumes a key, and :meth:`Fields.finish` rejects
 whatever was not consumed.
+
+Files are untrusted input: :func:`load_yaml_file` and :func:`parse_yaml_text` refuse files over
+:data:`MAX_YAML_BYTES`, text that is not UTF-8, nesting deeper than :data:`MAX_YAML_DEPTH`, more than
+:data:`MAX_YAML_NODES` nodes or :data:`MAX_YAML_ALIASES` aliases (an alias bomb), and duplicate keys,
+each with a one-line :class:`~ppod_ros.errors.ConfigError`. Numbers in exponent form without a
+dot (``1e-5``) read as numbers (YAML 1.1 would read a string); booleans are never numbers.
 """
 
 from __future__ import annotations
 
 import math
+import re
+import reprlib
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -20,13 +28,84 @@ from ppod_ros.errors import ConfigError
 
 _MISSING = object()
 
+#: Largest YAML file read (bytes): device descriptions, motions and parts are a few kB.
+MAX_YAML_BYTES = 1 << 20
+#: Deepest nesting of YAML collections (the formats need 3; deep nesting would exhaust the stack).
+MAX_YAML_DEPTH = 32
+#: Most YAML nodes in one document (a 1 MiB file of numbers has about 200 000).
+MAX_YAML_NODES = 200_000
+#: Most aliases (*ref) in one document: the formats need none; n aliases expand at most ~3^(n/3)-fold.
+MAX_YAML_ALIASES = 16
+
+_SHORT = reprlib.Repr()
+_SHORT.maxstring, _SHORT.maxother, _SHORT.maxlist, _SHORT.maxlevel = 60, 60, 8, 3
+
+
+def short_repr(value: Any) -> str:
+    """A repr bounded in length, for error messages about untrusted input."""
+    return _SHORT.repr(value)
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """SafeLoader with bounded depth, node and alias counts, no duplicate keys, ``1e-5`` as a float."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+        self._nodes = 0
+        self._aliases = 0
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            self._aliases += 1
+            if self._aliases > MAX_YAML_ALIASES:
+                raise ConfigError(f"more than {MAX_YAML_ALIASES} YAML aliases (an alias bomb?)")
+        self._nodes += 1
+        if self._nodes > MAX_YAML_NODES:
+            raise ConfigError(f"more than {MAX_YAML_NODES} YAML nodes")
+        self._depth += 1
+        if self._depth > MAX_YAML_DEPTH:
+            raise ConfigError(f"YAML nested deeper than {MAX_YAML_DEPTH} levels")
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                duplicate = key in seen
+            except TypeError:  # an unhashable key: the base class reports it
+                break
+            if duplicate:
+                line = key_node.start_mark.line + 1
+                raise ConfigError(f"duplicate key {short_repr(key)} (line {line})")
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+_StrictLoader.add_constructor("tag:yaml.org,2002:map", _StrictLoader.construct_yaml_map)
+# YAML 1.1 reads 1e-5 (no dot) as a string; YAML 1.2 and every user read it as a number.
+_StrictLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789")
+)
+
 
 def parse_yaml_text(text: str, origin: str) -> Mapping[str, Any]:
     """Parse YAML text that must hold a mapping; ``origin`` names it in error messages."""
+    if len(text) > MAX_YAML_BYTES:
+        raise ConfigError(f"{origin}: {len(text)} characters, more than the {MAX_YAML_BYTES} a YAML file may have")
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
+    except ConfigError as exc:
+        raise ConfigError(f"{origin}: {exc}") from exc
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{origin}: not valid YAML: {exc}") from exc
+        first = " ".join(str(exc).split())
+        raise ConfigError(f"{origin}: not valid YAML: {first}") from exc
+    except RecursionError as exc:
+        raise ConfigError(f"{origin}: YAML nested too deeply") from exc
     if not isinstance(data, Mapping):
         raise ConfigError(f"{origin}: expected a mapping of keys to values, got {type(data).__name__}")
     return data
@@ -36,9 +115,21 @@ def load_yaml_file(path: str | Path, what: str) -> Mapping[str, Any]:
     """Read and parse a YAML file holding a mapping; errors name the file and ``what`` it is."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        size = path.stat().st_size
+        if size > MAX_YAML_BYTES:
+            raise ConfigError(f"{what} file {path}: {size} bytes, more than the {MAX_YAML_BYTES} a YAML file may have")
+        raw = path.read_bytes()
     except OSError as exc:
         raise ConfigError(f"{what} file {path}: {exc.strerror or exc}") from exc
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{what} file {path}: not UTF-8 text (byte {exc.start}: {raw[exc.start:exc.start + 1]!r}); "
+            f"save it as UTF-8"
+        ) from exc
+    if "\x00" in text:
+        raise ConfigError(f"{what} file {path}: contains NUL bytes (a binary file, or UTF-16/32 text)")
     return parse_yaml_text(text, str(path))
 
 
@@ -172,7 +263,7 @@ def check_number(value: Any, name: str, *, min_value: float | None = None, max_v
     """Validate one finite real number; the message names ``name`` and the bound."""
     suffix = f" {unit}" if unit else ""
     if not _is_number(value):
-        raise ConfigError(f"{name}: expected a number{(' in ' + unit) if unit else ''}, got {value!r}")
+        raise ConfigError(f"{name}: expected a number{(' in ' + unit) if unit else ''}, got {short_repr(value)}")
     x = float(value)
     if not math.isfinite(x):
         raise ConfigError(f"{name}: must be finite, got {x}")
@@ -186,20 +277,33 @@ def check_number(value: Any, name: str, *, min_value: float | None = None, max_v
     return x
 
 
+def _has_bool(value: Any, depth: int = 0) -> bool:
+    """True if a (nested) list holds a boolean, which numpy would silently read as 0 or 1."""
+    if isinstance(value, (bool, np.bool_)):
+        return True
+    if isinstance(value, (list, tuple)) and depth < MAX_YAML_DEPTH:
+        return any(_has_bool(v, depth + 1) for v in value)
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind == "b"
+    return False
+
+
 def check_array(value: Any, name: str, *, shape: tuple[int | None, ...] | None = None,
                 min_value: float | None = None, max_value: float | None = None, unit: str = "",
                 dtype: type = float) -> np.ndarray:
     """Validate a finite numeric array of the given shape (None in ``shape`` = any length)."""
     if isinstance(value, (str, bytes, Mapping)):
         raise ConfigError(f"{name}: expected a list of numbers, got {type(value).__name__}")
+    if _has_bool(value):
+        raise ConfigError(f"{name}: expected numbers, got a boolean (true/false) in {short_repr(value)}")
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{name}: expected a list of numbers, got {value!r}") from exc
+        raise ConfigError(f"{name}: expected a list of numbers, got {short_repr(value)}") from exc
     if arr.dtype == object or arr.dtype.kind not in "iuf":
         if arr.dtype.kind == "b":
             raise ConfigError(f"{name}: expected numbers, got booleans")
-        raise ConfigError(f"{name}: expected numbers{(' in ' + unit) if unit else ''}, got {value!r}")
+        raise ConfigError(f"{name}: expected numbers{(' in ' + unit) if unit else ''}, got {short_repr(value)}")
     arr = arr.astype(dtype)
     if shape is not None:
         ok = arr.ndim == len(shape) and all(s is None or s == n for s, n in zip(shape, arr.shape))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ppod_ros.actuation.planning import GoalPlanner
-from ppod_ros.can import AckResult, DeviceLink, DeviceState, FaultInjectingBus, open_bus, send_estop
+from ppod_ros.can import PROTOCOL_VERSION, AckResult, DeviceLink, DeviceState, FaultInjectingBus, open_bus, send_estop
 from ppod_ros.can.codec import FrameCounters, Heartbeat, Version
 from ppod_ros.can.protocol import Fn
 from ppod_ros.device import default_device_config
@@ -133,7 +133,7 @@ def test_handshake_reports_the_devices_protocol_and_layout(config, buses):
     finally:
         stop.set()
         thread.join()
-    assert (v.major, v.n_actuators, v.n_channels, v.simulated) == (1, 6, 12, True)
+    assert (v.major, v.n_actuators, v.n_channels, v.simulated) == (PROTOCOL_VERSION[0], 6, 12, True)
 
 
 def test_handshake_times_out_without_a_device(config, buses):
@@ -149,7 +149,7 @@ def test_handshake_refuses_an_incompatible_major_version(config, buses):
     def reply():
         msg = fake.recv(2.0)
         assert msg is not None and msg.arbitration_id >> 4 == Fn.VERSION_REQUEST
-        fake.send(Version(2, 0, 6, 12, 5, 1, False).encode(1))
+        fake.send(Version(PROTOCOL_VERSION[0] + 1, 0, 6, 12, 5, 1, False).encode(1))
 
     thread = threading.Thread(target=reply)
     thread.start()

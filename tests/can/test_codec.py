@@ -1,5 +1,6 @@
 """CAN codec: every frame round-trips; bad frames are rejected and counted, never a crash."""
 
+import dataclasses
 import math
 
 import can
@@ -13,6 +14,7 @@ from ppod_ros.can.codec import (
     CoilRms,
     CoilTemps,
     Control,
+    DeviceLimit,
     Estop,
     FaultEvent,
     FrameCounters,
@@ -26,6 +28,7 @@ from ppod_ros.can.codec import (
     SummaryHeader,
     TableAck,
     TableCommit,
+    TableCrc,
     TableEntry,
     TableHeader,
     Version,
@@ -34,6 +37,7 @@ from ppod_ros.can.codec import (
     encode_summary,
     encode_table,
     table_checksum,
+    table_crc,
 )
 from ppod_ros.can.protocol import (
     CURRENT_LSB_A,
@@ -80,6 +84,13 @@ RECORDS = st.one_of(
     ),
     st.builds(TableEntry, u8, st.integers(0, 5), st.integers(1, 10), complex24(CURRENT_LSB_A)),
     st.builds(TableCommit, u8, st.integers(0, 60), st.integers(0, 0xFFFF)),
+    st.builds(TableCrc, u8, st.integers(0, 60), st.integers(0, 0xFFFF)),
+    st.builds(
+        DeviceLimit,
+        st.integers(0, 9),
+        st.just(10),
+        st.integers(0, 2**32 - 1).map(lambda v: v * 1e-6),
+    ),
     st.builds(VersionRequest, u8, u8, st.integers(0, 15)),
     st.builds(RawRequest, st.integers(0, 15), st.integers(1, 0xFFFF), st.integers(1, 16)),
     st.builds(FaultEvent, st.integers(0, 0xFFFF), st.sampled_from(list(DeviceState)), ms(2**32 - 1)),
@@ -136,7 +147,7 @@ def direction_of(rec):
 
 
 def same(a, b):
-    for name in a.__dataclass_fields__:
+    for name in (f.name for f in dataclasses.fields(a)):
         x, y = getattr(a, name), getattr(b, name)
         if isinstance(x, float) and math.isinf(x):
             assert math.isinf(y)
@@ -288,9 +299,13 @@ def test_table_frames_are_header_nonzero_entries_and_commit_with_an_order_free_c
     table[0] = np.arange(6) * 0.1 + 0.05j
     table[1, 2] = -0.3
     frames = encode_table(7, 30.0, 0.5, table, NODE)
-    assert [f.arbitration_id >> 4 for f in (frames[0], frames[-1])] == [Fn.TABLE_HEADER, Fn.TABLE_COMMIT]
-    entries = [decode(f, node_id=NODE, direction="to_device") for f in frames[1:-1]]
+    fns = [f.arbitration_id >> 4 for f in (frames[0], frames[-2], frames[-1])]
+    assert fns == [Fn.TABLE_HEADER, Fn.TABLE_CRC, Fn.TABLE_COMMIT]
+    entries = [decode(f, node_id=NODE, direction="to_device") for f in frames[1:-2]]
     assert len(entries) == 7  # six of harmonic 1, one of harmonic 2; zeros are not sent
+    header = decode(frames[0], node_id=NODE, direction="to_device")
+    crc = decode(frames[-2], node_id=NODE, direction="to_device")
+    assert crc.seq == 7 and crc.n_entries == 7 and crc.crc == table_crc(header, entries[::-1])
     commit = decode(frames[-1], node_id=NODE, direction="to_device")
     assert commit.n_entries == 7 and commit.checksum == table_checksum(entries[::-1])
     assert table_checksum(entries[:-1]) != commit.checksum
@@ -302,7 +317,32 @@ def test_table_frames_are_header_nonzero_entries_and_commit_with_an_order_free_c
 
 def test_an_all_zero_table_is_a_header_and_a_commit():
     frames = encode_table(1, 30.0, 0.5, np.zeros((3, 6)), NODE)
-    assert len(frames) == 2
+    assert [f.arbitration_id >> 4 for f in frames] == [Fn.TABLE_HEADER, Fn.TABLE_CRC, Fn.TABLE_COMMIT]
+
+
+def test_the_table_crc_changes_with_every_single_bit_of_the_header_and_the_entries():
+    table = np.zeros((2, 6), complex)
+    table[0] = 0.3 + 0.1j
+    frames = encode_table(9, 30.0, 0.5, table, NODE)
+    header = decode(frames[0], node_id=NODE, direction="to_device")
+    entries = [decode(f, node_id=NODE, direction="to_device") for f in frames[1:-2]]
+    reference = table_crc(header, entries)
+    payload = bytes(frames[0].data)
+    for bit in range(64):
+        flipped = bytearray(payload)
+        flipped[bit // 8] ^= 1 << (bit % 8)
+        try:
+            other = TableHeader._parse(bytes(flipped))
+        except ProtocolError:
+            continue  # a flip that makes the header invalid is rejected on its own
+        assert table_crc(other, entries) != reference, bit
+
+
+def test_new_frames_declare_their_payload_layout_for_generators():
+    for cls in (TableCrc, DeviceLimit):
+        fields = cls.FIELDS
+        assert fields and sum(f.size for f in fields) == cls.LENGTH
+        assert [f.offset for f in fields] == sorted(f.offset for f in fields)
 
 
 def test_frame_bits_follow_the_worst_case_stuffing_formula():

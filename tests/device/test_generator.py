@@ -31,12 +31,14 @@ def rig():
         bus.shutdown()
 
 
-def run(device, link, seconds):
+def run(device, link, seconds, gen=None):
     end = device.time_s + seconds
     while device.time_s < end - 1e-9:
         link.heartbeat()
         device.advance(0.05)
         link.poll()
+        if gen is not None:
+            gen.state()  # as the node's status timer does: also checks for missing acknowledgements
 
 
 def drain(bus) -> list:
@@ -107,26 +109,29 @@ def _table_ramps(config, frames) -> list[float]:
 
 def test_a_goals_starting_correction_may_reach_its_own_limit_once_and_ramps_with_the_goal(rig):
     config, device, link, gen, spy = rig
+    # Alternating signs (a yaw torque): uniform 0.6 A would lift the plate past LineSinkX's contact
+    # margin, which the envelope refuses for corrected tables too; this test is about the caps.
+    yaw = np.array([1, -1, 1, -1, 1, -1])
     goal = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0], name="LineSinkX",
                               ramp_time_s=0.4)
     gen.submit(goal)
     run(device, link, 0.05)
     drain(spy)
     k = np.array([1])
-    start = np.full((1, 6), 0.6 + 0.0j)  # over one learning step (0.2 A), within start_correction_a (1 A)
+    start = 0.6 * yaw[None, :] + 0.0j  # over one learning step (0.2 A), within start_correction_a (1 A)
     assert config.limits.correction_step_a < 0.6 < config.limits.start_correction_a
     out = gen.apply_correction(goal.key, k, start, start=True)
     assert out.applied and "clipped" not in out.reason
     np.testing.assert_allclose(gen.applied_correction_a[0], start[0], atol=2e-3)
     assert _table_ramps(config, drain(spy)) == [pytest.approx(0.4, abs=1e-3)]  # the goal's ramp, not 50 ms
     # Only the first correction of a goal is a start: a second one is an ordinary, clipped learning step.
-    again = gen.apply_correction(goal.key, k, np.full((1, 6), 1.4 + 0.0j), start=True)
+    again = gen.apply_correction(goal.key, k, 1.4 * yaw[None, :] + 0.0j, start=True)
     assert again.applied and "correction_step_a" in again.reason
     assert np.abs(gen.applied_correction_a[0] - start[0]).max() <= config.limits.correction_step_a + 2e-3
     assert _table_ramps(config, drain(spy)) == [pytest.approx(config.timing.min_ramp_s, abs=1e-3)]
     # A start larger than its own limit is clipped to it, on the next goal.
     gen.submit(LINESINKX)
-    big = gen.apply_correction(LINESINKX.key, k, np.full((1, 6), 3.0 + 0.0j), start=True)
+    big = gen.apply_correction(LINESINKX.key, k, 3.0 * yaw[None, :] + 0.0j, start=True)
     assert big.applied and "start_correction_a" in big.reason
     assert np.abs(gen.applied_correction_a[0]).max() <= config.limits.start_correction_a + 2e-3
 
@@ -175,3 +180,97 @@ def test_ramp_down_and_disable_waits_for_rest_while_the_device_runs(rig):
         stop.set()
         thread.join(2)
         link.stop()
+
+
+@pytest.fixture
+def faulty_rig():
+    from ppod_ros.can import FaultInjectingBus
+
+    config = default_device_config().with_can(interface="virtual", channel=f"test-gen-{next(_channels)}")
+    dev_bus, inner = open_bus(config.can), open_bus(config.can)
+    host_bus = FaultInjectingBus(inner, seed=3, affect="send")
+    device = SimDevice(config, dev_bus, seed=1)
+    # Acknowledgement timeouts on the device's clock: these tests run the device faster than real time.
+    link = DeviceLink(host_bus, config, clock=lambda: device.time_s)
+    gen = WaveformGenerator(link, GoalPlanner(config))
+    yield config, device, link, gen, host_bus
+    host_bus.shutdown()
+    dev_bus.shutdown()
+
+
+def test_bus_errors_never_escape_the_generator_and_goals_are_answered_after_a_bus_off(faulty_rig):
+    _, device, link, gen, bus = faulty_rig
+    assert gen.submit(LINESINKX).accepted
+    run(device, link, 0.5)
+    bus.go_bus_off()
+    out = gen.submit(LINESINKX.scaled(0.5))
+    assert not out.accepted and "not sent" in out.reason and "CAN send failed" in out.reason
+    correction = gen.apply_correction(None, np.array([1]), np.full((1, 6), 0.01 + 0j))
+    assert not correction.applied and "not sent" in correction.reason
+    bus.recover()
+    run(device, link, 0.5)  # the device's watchdog may have tripped meanwhile; a goal re-enables it
+    assert gen.submit(LINESINKX).accepted
+    run(device, link, 1.0)
+    assert gen.state()[0] == GeneratorState.ACTIVE
+
+
+def test_a_lost_table_is_sent_again_and_played(faulty_rig):
+    _, device, link, gen, bus = faulty_rig
+    run(device, link, 0.1)
+    bus.drop = 1.0
+    out = gen.submit(LINESINKX)  # every frame of the table is lost: no acknowledgement comes
+    bus.drop = 0.0
+    assert out.accepted
+    run(device, link, 1.5, gen)
+    assert gen.ack_counters.get("ack_timeout", 0) >= 1 and gen.ack_counters.get("retries", 0) >= 1
+    assert gen.state()[0] == GeneratorState.ACTIVE
+
+
+def test_a_table_the_device_keeps_refusing_ends_in_a_reported_rejection_not_endless_ramping(faulty_rig):
+    _, device, link, gen, bus = faulty_rig
+    run(device, link, 0.1)
+    bus.drop = 1.0  # nothing reaches the device, ever
+    assert gen.submit(LINESINKX).accepted
+    run(device, link, 3.0, gen)
+    state, reason, _ = gen.state()
+    assert state == GeneratorState.REJECTED and "not played" in reason and "acknowledgement" in reason
+    assert gen.ack_counters["retries"] == 2 and gen.ack_counters["goals_rejected"] == 1
+
+
+def test_an_over_limit_answer_rejects_the_goal_with_the_devices_reason():
+    config = default_device_config().with_can(interface="virtual", channel=f"test-gen-{next(_channels)}")
+    dev_bus, host_bus = open_bus(config.can), open_bus(config.can)
+    try:
+        # The device is stricter than the host here (its own configuration): it answers OVER_LIMIT.
+        device = SimDevice(config.replace("limits", coil_current_a=0.5), dev_bus, seed=1)
+        link = DeviceLink(host_bus, config, clock=lambda: device.time_s)
+        gen = WaveformGenerator(link, GoalPlanner(config))
+        assert gen.submit(LINESINKX).accepted
+        run(device, link, 0.3, gen)
+        state, reason, _ = gen.state()
+        assert state == GeneratorState.REJECTED and "OVER_LIMIT" in reason
+        assert gen.ack_counters == {"ack_over_limit": 1, "goals_rejected": 1}
+    finally:
+        dev_bus.shutdown()
+        host_bus.shutdown()
+
+
+def test_a_lost_older_correction_is_never_resent_over_a_newer_one(faulty_rig):
+    _, device, link, gen, bus = faulty_rig
+    assert gen.submit(LINESINKX).accepted
+    run(device, link, 0.8, gen)
+    k = np.array([1])
+    bus.drop = 1.0
+    lost = gen.apply_correction(None, k, np.full((1, 6), 0.05 + 0j))
+    bus.drop = 0.0
+    newer = gen.apply_correction(None, k, np.full((1, 6), 0.02j))
+    assert lost.applied and newer.applied
+    run(device, link, 1.5, gen)
+    assert gen.ack_counters.get("superseded_by_newer", 0) == 1 and gen.ack_counters.get("retries", 0) == 0
+    played = device.player.active
+    assert played.seq == newer.seq
+    sent = newer.result.currents_a
+    rows = played.currents.shape[0]
+    np.testing.assert_allclose(played.currents, sent[:rows], atol=1e-9)
+    assert not np.any(sent[rows:])
+    np.testing.assert_allclose(gen.applied_correction_a, newer.result.applied_a)

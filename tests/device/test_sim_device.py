@@ -2,6 +2,8 @@
 
 import itertools
 import math
+import threading
+import time
 
 import can
 import numpy as np
@@ -10,7 +12,7 @@ import pytest
 from ppod_ros.actuation.harmonics import analyze
 from ppod_ros.actuation.planning import GoalPlanner
 from ppod_ros.can import AckResult, DeviceLink, DeviceState, Fault, open_bus, send_estop
-from ppod_ros.can.codec import TableCommit, TableEntry, TableHeader, encode_table
+from ppod_ros.can.codec import TableCommit, TableCrc, TableEntry, TableHeader, encode_table, table_crc
 from ppod_ros.can.protocol import Fn, bus_load, split_id
 from ppod_ros.device import Mismatch, default_device_config
 from ppod_ros.errors import ConfigError, LimitError, PpodError
@@ -262,10 +264,86 @@ def test_a_table_with_a_wrong_checksum_is_rejected(rig):
     r.start(settle_s=0.1)
     node = r.config.can.device_node_id
     entry = TableEntry(42, 0, 1, 0.1 + 0j)
-    for rec in (TableHeader(42, 1, 30.0, 0.2), entry, TableCommit(42, 1, 0x1234)):
+    header = TableHeader(42, 1, 30.0, 0.2)
+    crc = TableCrc(42, 1, table_crc(header, [entry]))
+    for rec in (header, entry, crc, TableCommit(42, 1, 0x1234)):
         r.buses[1].send(rec.encode(node))
     r.run(0.1)
     assert [a.result for a in r.link.acks[42]] == [AckResult.CHECKSUM]
+
+
+def test_a_table_without_its_crc_frame_is_never_committed(rig):
+    r = rig()
+    r.start(settle_s=0.1)
+    frames = encode_table(43, 30.0, 0.2, np.full((1, 6), 0.1 + 0j), r.config.can.device_node_id)
+    for msg in frames[:-2] + frames[-1:]:  # TABLE_CRC lost
+        r.buses[1].send(msg)
+    r.run(0.1)
+    assert [a.result for a in r.link.acks[43]] == [AckResult.INCOMPLETE]
+
+
+def test_no_single_bit_flip_of_a_header_yields_an_accepted_table(rig):
+    # protocol 1.0's checksum covered the entries only: a flipped bit turned 30 Hz into 13.22 Hz and
+    # the device played it inside the excluded band. TABLE_CRC covers the header too.
+    r = rig()
+    r.start(settle_s=0.1)
+    node = r.config.can.device_node_id
+    frames = encode_table(44, 30.0, 0.2, np.full((1, 6), 0.05 + 0j), node)
+    for bit in range(0, 64, 3):
+        data = bytearray(frames[0].data)
+        data[bit // 8] ^= 1 << (bit % 8)
+        seq = data[0]
+        bad = can.Message(arbitration_id=frames[0].arbitration_id, data=bytes(data), is_extended_id=False)
+        for msg in [bad] + frames[1:]:
+            r.buses[1].send(msg)
+        r.run(0.03)
+        results = [a.result for a in r.link.acks.get(44, [])] + [a.result for a in r.link.acks.get(seq, [])]
+        assert AckResult.ACCEPTED not in results, bit
+        r.link.acks.clear()
+    assert r.device.player.active.frequency_hz == pytest.approx(30.0)
+
+
+def test_the_device_refuses_rows_in_its_excluded_band_and_past_its_own_stroke(rig):
+    r = rig()
+    r.start(settle_s=0.1)
+    low = np.zeros((1, 6), complex)
+    low[0, 0] = 0.05
+    seq = r.link.send_table(low, 13.22, 0.2)  # inside the excluded band 3-18 Hz
+    r.run(0.1)
+    assert [a.result for a in r.link.acks[seq]] == [AckResult.OVER_LIMIT]
+    assert r.device.tables.last_reason == "limits.excluded_bands_hz"
+    # 5 A in phase on every coil at 20 Hz: within the current limit, legs past +-2 mm by over 5 %.
+    seq = r.link.send_table(np.full((1, 6), 5.0 + 0j), 20.0, 0.2)
+    r.run(0.1)
+    assert [a.result for a in r.link.acks[seq]] == [AckResult.OVER_LIMIT]
+    assert r.device.tables.last_reason == "limits.leg_stroke_m"
+
+
+def _handshake_while_running(r, link):
+    stop = threading.Event()
+
+    def device():
+        while not stop.is_set():
+            r.device.advance(0.005)
+            time.sleep(0.001)
+
+    thread = threading.Thread(target=device)
+    thread.start()
+    try:
+        return link.handshake(timeout_s=2.0)
+    finally:
+        stop.set()
+        thread.join()
+
+
+def test_the_handshake_reports_the_devices_limits_and_refuses_a_looser_description(rig):
+    r = rig()
+    _handshake_while_running(r, r.link)
+    assert r.link.device_limits[0] == pytest.approx(r.config.limits.leg_stroke_m)
+    loose = r.config.replace("limits", leg_stroke_m=0.003)
+    link = DeviceLink(r.buses[1], loose)
+    with pytest.raises(ConfigError, match="limits.leg_stroke_m = 0.003 m exceeds the device's own 0.002 m"):
+        _handshake_while_running(r, link)
 
 
 def test_the_device_checks_tables_against_its_own_current_limit(rig):
@@ -455,3 +533,36 @@ def test_a_correction_reaches_the_plate_through_the_table(rig):
     expected = r.planner.plant.frequency_response(90.0) @ corr[2]
     assert np.allclose(after[2] - before[2], expected, atol=0.01 * np.max(np.abs(expected)) + 1e-3)
     assert np.allclose(after[0], before[0], atol=1e-2)
+
+
+def test_a_stopping_fault_ramps_down_from_the_end_of_its_period_without_a_step(rig):
+    # The fault is found after a firmware period has played: its ramp must start at that period's
+    # end (it started one period early, and the coil reference stepped by up to 0.55 A).
+    cfg = (
+        exact_config()
+        .replace("limits", coil_temperature_c=30.0)
+        .replace("actuators", thermal_time_constant_s=0.2)
+    )
+    r = rig(cfg)
+    played = {}
+    simulate = r.device.plant.simulate
+
+    def recording(u, dt, every):
+        res = simulate(u, dt, every)
+        n0 = r.device.cycle_index * r.device.steps_per_cycle + r.device.step_in_cycle
+        for i, row in enumerate(np.asarray(u)[:, :6]):
+            played[n0 + i] = row.copy()  # a recomputation from a period replaces what follows it
+        return res
+
+    r.device.plant.simulate = recording
+    r.link.enable()
+    r.link.send_plan(GoalPlanner(default_device_config()).plan(LINESINKX))
+    r.run(1.5)
+    assert r.device.state == DeviceState.FAULT
+    steps = sorted(played)
+    refs = np.array([played[n] for n in steps])
+    assert np.array_equal(np.diff(steps), np.ones(len(steps) - 1))
+    # The second difference of a smooth reference is tiny (a 1.5 A sinusoid sampled 280 times a
+    # cycle: 7.5e-4 A); a step shows as a spike of its own size (0.03 A with the early ramp).
+    curvature = np.max(np.abs(np.diff(refs, 2, axis=0)))
+    assert curvature < 0.005

@@ -132,3 +132,26 @@ def test_emergency_stop_service_works_before_configure_and_when_active(ros, sim)
     assert ros.wait_until(lambda: sim.device.state in (DeviceState.ENABLED, DeviceState.RAMPING), 2)
     assert ros.call(Trigger, "/" + topics.ESTOP, Trigger.Request()).success
     assert ros.wait_until(lambda: sim.device.state == DeviceState.ESTOP, 2)
+
+
+def test_a_bus_off_episode_rejects_goals_and_the_node_answers_again_after_it(ros, sim):
+    from ppod_msgs.srv import SetPlateMotion
+    from std_srvs.srv import Trigger
+
+    from ppod_nodes.common import topics
+    from ppod_ros.can import FaultInjectingBus
+
+    node = _node(ros, sim)
+    faulty = FaultInjectingBus(node.link.bus)
+    node.link.bus = faulty  # the node's own bus goes bus-off: every send raises
+    try:
+        faulty.go_bus_off()
+        resp = ros.call(SetPlateMotion, "/" + topics.SET_MOTION, _request(LINESINKX))
+        assert not resp.accepted and "CAN send failed" in resp.reason
+        stop = ros.call(Trigger, "/" + topics.STOP, Trigger.Request())
+        assert not stop.success and "not sent" in stop.message
+        faulty.recover()
+        resp = ros.call(SetPlateMotion, "/" + topics.SET_MOTION, _request(LINESINKX))
+        assert resp.accepted, resp.reason
+    finally:
+        node.link.bus = faulty.inner

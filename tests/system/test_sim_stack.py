@@ -129,3 +129,32 @@ def test_feedback_brings_the_mismatched_plate_within_one_percent_in_five_iterati
         true_errors = [_truth_error(m, goal) for m in truth[-10:]]
     assert first.iteration <= 5 and first.error_relative <= 0.01 and first.out_of_goal_relative <= 0.005
     assert np.median(true_errors) <= 0.01, true_errors
+
+
+def test_no_bad_input_stops_a_node_and_every_node_accepts_a_goal_afterwards(tmp_path):
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+    from ppod_msgs.srv import SetPlateMotion
+
+    from ppod_nodes.common import topics
+    from ppod_nodes.common.convert import motion_to_msg
+    from ppod_nodes.common.session import RosSession
+    from ppod_ros.motion import PlateMotion
+
+    def ask(ros, text):
+        req = SetPlateMotion.Request(motion=motion_to_msg(PlateMotion.from_yaml_text(text)))
+        return ros.call(SetPlateMotion, "/" + topics.SET_MOTION, req, timeout_s=15)
+
+    with running_stack(tmp_path, [node(SIM, mismatch="zero"), GENERATOR]) as stack, \
+            RosSession("system_test") as ros:
+        over = ask(ros, LINESINKX.replace("[10, 0, 0, 0, 100, 0]", "[10, 0, 0, 0, 400, 0]"))
+        assert not over.accepted and over.limit == "limits.contact_margin_mps2"
+        long_ramp = ask(ros, LINESINKX.replace("ramp_time_s: 0.3", "ramp_time_s: 70"))
+        assert not long_ramp.accepted and long_ramp.limit == "protocol.max_ramp_s", long_ramp.reason
+        again = ros.call(ChangeState, "/waveform_generator/change_state",
+                         ChangeState.Request(transition=Transition(id=Transition.TRANSITION_ACTIVATE)),
+                         timeout_s=15)
+        assert not again.success  # activate while active: refused, not a crash
+        assert ask(ros, LINESINKX).accepted
+        assert all(c.process.poll() is None for c in stack.supervisor.children), log_text(tmp_path)[-3000:]
+    assert "Traceback" not in log_text(tmp_path), log_text(tmp_path)[-3000:]

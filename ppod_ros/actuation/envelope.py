@@ -1,0 +1,414 @@
+"""The device's safety envelope: one checker for every table and every plate motion.
+
+Every table the host commits (a goal's feed-forward table, or a goal plus a feedback correction)
+and every plate motion a planner proposes is held to the same limits of the device description
+(``limits.*``, docs/device.md):
+
+====================================  =================================================================
+limit                                 what is checked
+====================================  =================================================================
+``limits.frequency_range_hz``         every row with current (every harmonic of a motion) in the band
+``limits.excluded_bands_hz``          ... and outside every excluded band (no current ever goes there)
+``limits.plate_accel_mps2``           peak \\|p''\\| over the cycle
+``limits.plate_angular_accel_radps2`` peak \\|alpha\\| over the cycle
+``limits.contact_margin_mps2``        min over the working disc and the cycle of g + a_n
+``limits.leg_stroke_m``               peak leg displacement: exact inverse kinematics, and for a
+                                      table also the nominal plant's linear leg prediction
+``limits.coil_current_a``             peak coil current
+``limits.coil_temperature_c``         steady-state I^2 R heating of the RMS current
+``limits.amplifier_voltage_v``        peak amplifier voltage (nominal plant)
+====================================  =================================================================
+
+A table's plate motion is what the nominal plant (:class:`~ppod_ros.actuation.plant.NominalPlant`)
+predicts for it. Peaks and the contact margin are not taken from samples alone: the sampled
+extremum is refined with parabolas through the largest samples (:func:`refined_max`), so what is
+reported is the true extremum to about 1e-10 relative, never the 0.1 % low a 64-sample grid gives.
+
+:class:`EnvelopeReport` gives every limit as a *ratio*, use over limit, that scales linearly with the
+amplitude of the motion or table: value / limit for the peaks, ``(g - margin) / (g - limit)`` for the
+contact margin (the fraction of the allowed loss of normal acceleration that is used) and
+``I_rms / I_rms(limit)`` for the thermal limit. A ratio of 0.87 means the motion could grow by 15 %
+before reaching that limit, so a planner that wants 15 % headroom asks ``report.within(1 / 1.15)``.
+A row at a forbidden frequency has the ratio ``inf``.
+
+Example (a goal with 15 % headroom)::
+
+    env = Envelope(config)
+    report = env.check_motion(motion)
+    if not report.within(1 / 1.15):
+        name, ratio = report.worst()
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ppod_ros.actuation.harmonics import PEAK_SAMPLES_PER_PERIOD, rms, synthesize
+from ppod_ros.actuation.plant import NominalPlant
+from ppod_ros.device.config import DeviceConfig
+from ppod_ros.errors import ConfigError, LimitError
+from ppod_ros.kinematics.stewart import LegTrajectory, leg_trajectory
+from ppod_ros.motion import GRAVITY_MPS2, MAX_HARMONIC, PlateMotion
+
+#: The limits in the order a goal is checked (the first one over is the one a rejection names).
+LIMIT_ORDER = (
+    "limits.frequency_range_hz",
+    "limits.excluded_bands_hz",
+    "limits.plate_accel_mps2",
+    "limits.plate_angular_accel_radps2",
+    "limits.contact_margin_mps2",
+    "limits.leg_stroke_m",
+    "limits.coil_current_a",
+    "limits.coil_temperature_c",
+    "limits.amplifier_voltage_v",
+)
+
+_UNITS = {
+    "limits.frequency_range_hz": "Hz",
+    "limits.excluded_bands_hz": "Hz",
+    "limits.plate_accel_mps2": "m/s^2",
+    "limits.plate_angular_accel_radps2": "rad/s^2",
+    "limits.contact_margin_mps2": "m/s^2",
+    "limits.leg_stroke_m": "m",
+    "limits.coil_current_a": "A",
+    "limits.coil_temperature_c": "degC",
+    "limits.amplifier_voltage_v": "V",
+}
+
+_WHAT = {
+    "limits.plate_accel_mps2": "peak plate acceleration",
+    "limits.plate_angular_accel_radps2": "peak angular acceleration",
+    "limits.contact_margin_mps2": "contact margin min(g + a_n) over the working disc",
+    "limits.leg_stroke_m": "peak leg displacement",
+    "limits.coil_current_a": "peak coil current",
+    "limits.coil_temperature_c": "steady-state coil temperature",
+    "limits.amplifier_voltage_v": "peak amplifier voltage",
+}
+
+#: Candidates refined per column: the largest sampled local maxima (two: a near-tie between two
+#: crests may put the true maximum at either).
+REFINE_CANDIDATES = 2
+#: The second parabola uses samples this much closer than the grid.
+REFINE_ZOOM = 16
+
+
+def _vertex(ym: np.ndarray, y0: np.ndarray, yp: np.ndarray, step: float) -> np.ndarray:
+    """Offset (rad) of the vertex of the parabola through (-step, ym), (0, y0), (step, yp), within +-step."""
+    curvature = ym - 2.0 * y0 + yp
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(curvature < 0, 0.5 * step * (ym - yp) / curvature, 0.0)
+    return np.clip(d, -step, step)
+
+
+def refined_max(fn, n_samples: int) -> np.ndarray:
+    """Maximum over one cycle of each column of ``fn(theta)``, refined beyond the sample grid.
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(theta)`` with theta (M,) phases of the fundamental (rad) returns (M, C) values.
+    n_samples : int
+        Grid of the first pass (at least 64 per period of the highest harmonic in ``fn``).
+
+    Returns
+    -------
+    ndarray, shape (C,)
+        The largest value found: the grid maximum, and ``fn`` at the vertex of a parabola through
+        each of the :data:`REFINE_CANDIDATES` largest sampled local maxima and its neighbours,
+        refined once more with a parabola on a grid :data:`REFINE_ZOOM` times finer (the extremum to
+        about 1e-10 relative; a 64-sample grid alone reads a sinusoid's crest up to 0.12 % low).
+    """
+    theta = 2.0 * math.pi * np.arange(n_samples) / n_samples
+    y = np.asarray(fn(theta), dtype=float)
+    best = np.max(y, axis=0)
+    C = y.shape[1]
+    cols = np.arange(C)
+    step = 2.0 * math.pi / n_samples
+    left, right = np.roll(y, 1, axis=0), np.roll(y, -1, axis=0)
+    score = np.where((y >= left) & (y >= right), y, -np.inf)
+    idx = np.argsort(-score, axis=0)[: min(REFINE_CANDIDATES, n_samples)]  # (n_cand, C)
+    centres = theta[idx] + _vertex(left[idx, cols], y[idx, cols], right[idx, cols], step)
+    fine = step / REFINE_ZOOM
+    grid = (centres[..., None] + np.array([-fine, 0.0, fine])).reshape(-1)
+    n_cand = idx.shape[0]
+    v = np.asarray(fn(grid), dtype=float).reshape(n_cand, C, 3, C)[:, cols, :, cols]  # (C, n_cand, 3)
+    best = np.maximum(best, v.max(axis=(1, 2)))
+    final = centres.T + _vertex(v[..., 0], v[..., 1], v[..., 2], fine)  # (C, n_cand)
+    w = np.asarray(fn(final.reshape(-1)), dtype=float).reshape(C, n_cand, C)[cols, :, cols]  # (C, n_cand)
+    return np.maximum(best, w.max(axis=1))
+
+
+def table_peak(table: np.ndarray, k: np.ndarray | None = None) -> np.ndarray:
+    """Refined peak of |y(t)| per column of a harmonic table (K, C) (rows k, default 1..K), shape (C,)."""
+    table = np.asarray(table, dtype=complex)
+    if table.shape[0] == 0 or not np.any(table):
+        return np.zeros(table.shape[1])
+    k = np.arange(1, table.shape[0] + 1) if k is None else np.asarray(k)
+    n = PEAK_SAMPLES_PER_PERIOD * max(1, int(np.max(k)))
+    return refined_max(lambda th: np.abs(synthesize(table, k, th)), n)
+
+
+def motion_extremes(phasors: np.ndarray, k: np.ndarray, radius_m: float) -> tuple[float, float, float]:
+    """(peak |p''|, peak |alpha|, min over the disc and cycle of g + a_n) of acceleration phasors (K, 6)."""
+    X = np.asarray(phasors, dtype=complex)
+    if X.shape[0] == 0 or not np.any(X):
+        return 0.0, 0.0, GRAVITY_MPS2
+    k = np.asarray(k)
+    n = PEAK_SAMPLES_PER_PERIOD * max(4, int(np.max(k)))
+
+    def fn(theta: np.ndarray) -> np.ndarray:
+        u = synthesize(X, k, theta)
+        return np.stack(
+            [
+                np.linalg.norm(u[:, :3], axis=1),
+                np.linalg.norm(u[:, 3:], axis=1),
+                radius_m * np.hypot(u[:, 3], u[:, 4]) - u[:, 2],  # the loss of normal acceleration
+            ],
+            axis=1,
+        )
+
+    acc, ang, loss = refined_max(fn, n)
+    return float(acc), float(ang), float(GRAVITY_MPS2 - loss)
+
+
+@dataclass(frozen=True)
+class EnvelopeReport:
+    """Every limit of the envelope for one table or motion (see the module docstring).
+
+    Attributes
+    ----------
+    frequency_hz : float
+    values : dict
+        Limit name -> the value checked (its unit: peak m/s^2, margin m/s^2, stroke m, A, degC, V;
+        for the frequency limits the worst row's frequency in Hz, NaN when all rows are allowed).
+    ratios : dict
+        Limit name -> use / limit, linear in amplitude (inf for a row at a forbidden frequency).
+    forbidden_rows : tuple of int
+        Harmonic numbers that carry current (or motion) at a frequency outside the band or inside
+        an excluded band.
+    worst_actuator : dict
+        Limit name -> actuator / leg index of the peak, for the per-actuator limits.
+    """
+
+    frequency_hz: float
+    values: dict[str, float]
+    ratios: dict[str, float]
+    limits: dict[str, float]
+    forbidden_rows: tuple[int, ...] = ()
+    worst_actuator: dict[str, int] = field(default_factory=dict)
+
+    def within(self, max_ratio: float = 1.0) -> bool:
+        """True when every ratio is at most ``max_ratio`` (1: on the limits; 1 / 1.15: 15 % headroom)."""
+        return all(r <= max_ratio for r in self.ratios.values())
+
+    def over(self, max_ratio: float = 1.0) -> list[str]:
+        """Limit names whose ratio exceeds ``max_ratio``, in checking order."""
+        return [name for name in LIMIT_ORDER if self.ratios.get(name, 0.0) > max_ratio]
+
+    def worst(self) -> tuple[str, float]:
+        """(limit name, ratio) of the largest ratio."""
+        name = max(LIMIT_ORDER, key=lambda n: self.ratios.get(n, 0.0))
+        return name, self.ratios.get(name, 0.0)
+
+    def error(self, max_ratio: float = 1.0) -> LimitError | None:
+        """A LimitError naming the first limit over ``max_ratio`` (checking order), or None."""
+        over = self.over(max_ratio)
+        if not over:
+            return None
+        name = over[0]
+        value, limit, unit = self.values[name], self.limits[name], _UNITS[name]
+        if name in ("limits.frequency_range_hz", "limits.excluded_bands_hz"):
+            return LimitError(
+                f"harmonic {self.forbidden_rows[0]} at {value:g} Hz is outside {name} (no current may "
+                f"go to a forbidden frequency)",
+                limit=name,
+                limit_value=limit,
+                requested=value,
+            )
+        where = f" of actuator {self.worst_actuator[name]}" if name in self.worst_actuator else ""
+        relation = "is below" if name == "limits.contact_margin_mps2" else "exceeds"
+        return LimitError(
+            f"{_WHAT[name]}{where} {value:.4g} {unit} {relation} {name} = {limit:g} {unit}",
+            limit=name,
+            limit_value=limit,
+            requested=value,
+        )
+
+
+class Envelope:
+    """The one envelope checker of a device (see the module docstring).
+
+    Parameters
+    ----------
+    config : DeviceConfig
+    plant : NominalPlant, optional
+        Shared model instance (built from ``config`` when omitted).
+    """
+
+    def __init__(self, config: DeviceConfig, plant: NominalPlant | None = None):
+        self.config = config
+        self.plant = plant if plant is not None else NominalPlant(config)
+        self.kinematics = self.plant.kinematics
+
+    # ------------------------------------------------------------------ frequencies
+    def forbidden(self, frequency_hz: float, k) -> list[tuple[int, str, float]]:
+        """(harmonic, limit name, frequency Hz) of every harmonic ``k`` at a forbidden frequency."""
+        lim = self.config.limits
+        lo, hi = lim.frequency_range_hz
+        out = []
+        for kk in np.asarray(k, dtype=int).ravel():
+            fk = float(kk * frequency_hz)
+            if not lo <= fk <= hi:
+                out.append((int(kk), "limits.frequency_range_hz", fk))
+            elif any(b_lo <= fk <= b_hi for b_lo, b_hi in lim.excluded_bands_hz):
+                out.append((int(kk), "limits.excluded_bands_hz", fk))
+        return out
+
+    def allowed_rows(self, frequency_hz: float, n_rows: int) -> np.ndarray:
+        """Boolean mask (n_rows,): which rows 1..n_rows of a table may carry current."""
+        bad = {kk for kk, _, _ in self.forbidden(frequency_hz, np.arange(1, n_rows + 1))}
+        return np.array([kk not in bad for kk in range(1, n_rows + 1)], dtype=bool)
+
+    # ------------------------------------------------------------------ checks
+    def check_table(self, frequency_hz: float, currents: np.ndarray) -> EnvelopeReport:
+        """The envelope of a dense current table (K, 6) (A, row k-1 = harmonic k) at ``frequency_hz``.
+
+        The plate motion, leg displacements and voltages are the nominal plant's prediction.
+        """
+        f = float(frequency_hz)
+        if not (math.isfinite(f) and f > 0):
+            raise ConfigError(f"frequency_hz: must be finite and > 0 Hz, got {frequency_hz!r}")
+        I = np.asarray(currents, dtype=complex)
+        if I.ndim != 2 or I.shape[1] != 6 or not np.all(np.isfinite(I)) or I.shape[0] > MAX_HARMONIC:
+            raise ConfigError(
+                f"currents: expected a finite (K <= {MAX_HARMONIC}, 6) table of coil-current phasors (A), "
+                f"got shape {I.shape}"
+            )
+        rows = np.flatnonzero(np.any(I != 0, axis=1)) + 1
+        values: dict[str, float] = {}
+        ratios: dict[str, float] = {}
+        worst: dict[str, int] = {}
+        self._frequencies(f, rows, values, ratios)
+        if rows.size == 0:
+            for name in LIMIT_ORDER[2:]:
+                values[name], ratios[name] = (GRAVITY_MPS2, 0.0) if "contact" in name else (0.0, 0.0)
+            values["limits.coil_temperature_c"] = self.config.actuators.ambient_temperature_c
+            return EnvelopeReport(f, values, ratios, self._limits(), (), worst)
+        K = I.shape[0]
+        k = np.arange(1, K + 1)
+        out = self.plant.predict_all(f, I, ("voltage", "leg", "accel"))
+        acc, ang, margin = motion_extremes(out["accel"], k, self.config.limits.working_radius_m)
+        self._motion_values(acc, ang, margin, values, ratios)
+        legs_linear = table_peak(out["leg"], k)
+        motion = PlateMotion.from_phasors(f, k, out["accel"])
+        legs_exact = self.exact_stroke(motion)
+        legs = np.maximum(legs_linear, legs_exact)
+        self._peak("limits.leg_stroke_m", legs, values, ratios, worst)
+        self._actuators(I, table_peak(I, k), table_peak(out["voltage"], k), values, ratios, worst)
+        forbidden = tuple(kk for kk, _, _ in self.forbidden(f, rows))
+        return EnvelopeReport(f, values, ratios, self._limits(), forbidden, worst)
+
+    def check_motion(self, motion: PlateMotion, currents: np.ndarray | None = None) -> EnvelopeReport:
+        """The envelope of a plate motion: its own peaks, margin and exact stroke, and its table's
+        current, thermal and voltage limits (``currents``: its table, default the nominal feed-forward
+        of its harmonics)."""
+        if not isinstance(motion, PlateMotion):
+            raise ConfigError(f"motion: expected a PlateMotion, got {type(motion).__name__}")
+        active = motion.pruned()
+        f = motion.frequency_hz
+        values: dict[str, float] = {}
+        ratios: dict[str, float] = {}
+        worst: dict[str, int] = {}
+        self._frequencies(f, active.k, values, ratios)
+        acc, ang, margin = motion_extremes(active.phasors(), active.k, self.config.limits.working_radius_m)
+        self._motion_values(acc, ang, margin, values, ratios)
+        self._peak("limits.leg_stroke_m", self.exact_stroke(active), values, ratios, worst)
+        if currents is None:
+            top = int(active.k.max()) if active.num_harmonics else 0
+            currents = self.plant.feedforward(active, top) if top else np.zeros((1, 6), complex)
+        I = np.asarray(currents, dtype=complex)
+        k = np.arange(1, I.shape[0] + 1)
+        volts = self.plant.predict(f, I, "voltage") if np.any(I) else np.zeros_like(I)
+        self._actuators(I, table_peak(I, k), table_peak(volts, k), values, ratios, worst)
+        forbidden = tuple(kk for kk, _, _ in self.forbidden(f, active.k))
+        return EnvelopeReport(f, values, ratios, self._limits(), forbidden, worst)
+
+    # ------------------------------------------------------------------ pieces
+    def _limits(self) -> dict[str, float]:
+        lim = self.config.limits
+        return {
+            "limits.frequency_range_hz": float(lim.frequency_range_hz[1]),
+            "limits.excluded_bands_hz": float("nan"),
+            "limits.plate_accel_mps2": lim.plate_accel_mps2,
+            "limits.plate_angular_accel_radps2": lim.plate_angular_accel_radps2,
+            "limits.contact_margin_mps2": lim.contact_margin_mps2,
+            "limits.leg_stroke_m": lim.leg_stroke_m,
+            "limits.coil_current_a": lim.coil_current_a,
+            "limits.coil_temperature_c": lim.coil_temperature_c,
+            "limits.amplifier_voltage_v": lim.amplifier_voltage_v,
+        }
+
+    def _frequencies(self, f: float, rows, values: dict, ratios: dict) -> None:
+        bad = self.forbidden(f, rows)
+        for name in ("limits.frequency_range_hz", "limits.excluded_bands_hz"):
+            hits = [fk for _, n, fk in bad if n == name]
+            values[name] = hits[0] if hits else float("nan")
+            ratios[name] = math.inf if hits else 0.0
+
+    def _motion_values(self, acc: float, ang: float, margin: float, values: dict, ratios: dict) -> None:
+        lim = self.config.limits
+        values["limits.plate_accel_mps2"] = acc
+        ratios["limits.plate_accel_mps2"] = acc / lim.plate_accel_mps2
+        values["limits.plate_angular_accel_radps2"] = ang
+        ratios["limits.plate_angular_accel_radps2"] = ang / lim.plate_angular_accel_radps2
+        values["limits.contact_margin_mps2"] = margin
+        allowed_loss = GRAVITY_MPS2 - lim.contact_margin_mps2
+        ratios["limits.contact_margin_mps2"] = max(0.0, GRAVITY_MPS2 - margin) / allowed_loss
+
+    def exact_stroke(self, motion: PlateMotion, legs: LegTrajectory | None = None) -> np.ndarray:
+        """Peak |leg displacement| per leg (6,) (m) of ``motion`` from the exact inverse kinematics
+        (``legs``: its leg trajectory with harmonics up to 2 top, if already computed)."""
+        if motion.is_zero():
+            return np.zeros(6)
+        top = int(motion.k.max())
+        if legs is None or legs.k.size < 2 * top:
+            legs = leg_trajectory(self.kinematics, motion, kmax=2 * top)
+        # The exact displacement is band-limited to 2 top to second order: refine its peak from
+        # its harmonics and mean, and never report less than the sampled peak.
+        offset = legs.mean_m
+        n = PEAK_SAMPLES_PER_PERIOD * 2 * top
+        refined = refined_max(
+            lambda th: np.abs(offset + synthesize(legs.harmonics_m, legs.k, th)), n
+        )
+        return np.maximum(refined, legs.peak_m)
+
+    def _peak(self, name: str, peaks: np.ndarray, values: dict, ratios: dict, worst: dict) -> None:
+        j = int(np.argmax(peaks))
+        values[name] = float(peaks[j])
+        ratios[name] = float(peaks[j]) / self._limits()[name]
+        worst[name] = j
+
+    def _actuators(self, I, current_peak, voltage_peak, values: dict, ratios: dict, worst: dict) -> None:
+        a, lim = self.config.actuators, self.config.limits
+        self._peak("limits.coil_current_a", current_peak, values, ratios, worst)
+        i_rms = rms(I)
+        j = int(np.argmax(i_rms))
+        rise = a.thermal_resistance_k_per_w * a.resistance_ohm
+        values["limits.coil_temperature_c"] = float(a.ambient_temperature_c + rise * i_rms[j] ** 2)
+        allowed = max(lim.coil_temperature_c - a.ambient_temperature_c, 1e-12)
+        ratios["limits.coil_temperature_c"] = float(i_rms[j] / math.sqrt(allowed / rise))
+        worst["limits.coil_temperature_c"] = j
+        self._peak("limits.amplifier_voltage_v", voltage_peak, values, ratios, worst)
+
+
+__all__ = [
+    "LIMIT_ORDER",
+    "Envelope",
+    "EnvelopeReport",
+    "motion_extremes",
+    "refined_max",
+    "table_peak",
+]

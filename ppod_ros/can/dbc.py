@@ -26,6 +26,7 @@ from ppod_ros.can.protocol import (
     DEVICE_TO_HOST,
     FREQUENCY_LSB_HZ,
     HEARTBEAT_AGE_LSB_S,
+    LIMIT_LSB,
     PROTOCOL_VERSION,
     RAMP_LSB_S,
     RAW_LSB_MPS2,
@@ -35,6 +36,7 @@ from ppod_ros.can.protocol import (
     Command,
     DeviceState,
     Fn,
+    LimitItem,
     can_id,
 )
 
@@ -127,6 +129,13 @@ LAYOUTS: dict[Fn, tuple[Signal, ...]] = {
     Fn.RAW_DATA: (Signal("index", 0, 12, field="index"), Signal("channel", 12, 4, field="channel"),
                   *(Signal(f"sample_{i}", 16 + 16 * i, 16, True, RAW_LSB_MPS2, unit="m/s^2",
                            field=f"samples_mps2[{i}]") for i in range(3))),
+    Fn.TABLE_CRC: (_u8("seq", 0), _u8("n_entries", 1),
+                   Signal("crc", 16, 16, field="crc",
+                          comment="CRC-16/CCITT (init 0xFFFF) over the header payload and the entries' bytes 1..7")),
+    Fn.DEVICE_LIMIT: (Signal("item", 0, 8, field="item", choices=LimitItem,
+                             comment="8 + 2 i / 9 + 2 i: lower / upper edge of excluded band i"),
+                      _u8("count", 1),
+                      Signal("value", 16, 32, scale=LIMIT_LSB, unit="SI", field="value")),
 }
 
 

@@ -8,6 +8,7 @@ from ppod_ros.can.codec import (
     CoilRms,
     CoilTemps,
     Control,
+    DeviceLimit,
     Estop,
     FaultEvent,
     Heartbeat,
@@ -20,6 +21,7 @@ from ppod_ros.can.codec import (
     SummaryHeader,
     TableAck,
     TableCommit,
+    TableCrc,
     TableEntry,
     TableHeader,
     Version,
@@ -66,4 +68,8 @@ GOLDEN = [
     (RawHeader(3, 2, 0x0FFF, 16, 64), 0x111, "31ff0f1000004000"),
     # [0:2] channel 5 << 12 | index 9, [2:8] 3 x i16: 1 m/s^2 = 512, -1 m/s^2, 0 (2^-9 m/s^2 steps)
     (RawData(5, 9, (1.0, -1.0, 0.0)), 0x121, "09500002 00fe0000".replace(" ", "")),
+    # [0] u8 seq 1, [1] u8 entries 12, [2:4] u16 crc 0x1D0F
+    (TableCrc(1, 12, 0x1D0F), 0x131, "010c0f1d"),
+    # [0] u8 item 1 (coil current), [1] u8 items 10, [2:6] u32 value 3 A = 3 000 000 micro-units
+    (DeviceLimit(1, 10, 3.0), 0x141, "010ac0c62d00"),
 ]

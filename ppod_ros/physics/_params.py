@@ -151,9 +151,11 @@ def _warm_up() -> None:
         dim = configs.shape[1]
         P = point_rows(part, configs) if kind == 0 else rigid_rows(part, configs, settings.friction_eps_mps)
         n = configs.shape[0]
-        out_v = np.zeros((n, dim))
-        out_x = np.zeros((n, dim))
-        _solve.solve_batch(kind, mc, P, np.zeros((n, dim)), np.zeros(n, np.bool_), motion.period_s, 1,
-                           tab.A, tab.B, tab.C, tab.E, tab.E3, S, out_v, out_x, np.zeros(n, np.int64),
-                           np.zeros(n, np.int64), np.zeros(n))
-        _dynamics_kernel.warm_up(kind, mc, P, dim, tab, S, motion.period_s)
+        R = np.ones((1, n))
+        for kernel in (_solve.solve_motions_serial, _solve.solve_motions):
+            kernel(kind, mc[None], np.array([mc.shape[0]], np.int64), P[None].copy(), np.zeros((1, n, dim)),
+                   np.zeros((1, n), np.bool_), R, np.array([motion.period_s]), np.array([1], np.int64),
+                   tab.A, tab.B, tab.C, tab.E, tab.E3, S, np.zeros((1, n, dim)), np.zeros((1, n, dim)),
+                   np.zeros((1, n), np.int64), np.zeros((1, n), np.int64), np.zeros((1, n)), np.ones((1, n)))
+        _dynamics_kernel.warm_up(kind, mc, P, dim, tab, S, motion.period_s,
+                                 (_dynamics_kernel.advance_group_serial, _dynamics_kernel.advance_group))

@@ -43,6 +43,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "RK45 chatter, and a capped run gives a lower bound on the ratio")
     parser.add_argument("--repeat", type=int, default=3, help="timed repetitions, best kept (default 3)")
     parser.add_argument("--seed", type=int, default=2024, help="seed of the baseline subset")
+    parser.add_argument("--stalls", action="store_true",
+                        help="only the per-call latency section (busy loop on the other core, p50/p90)")
+    parser.add_argument("--stall-calls", type=int, default=200, metavar="N",
+                        help="timed calls per case in the latency section (default 200)")
+    parser.add_argument("--no-busy", dest="busy", action="store_false",
+                        help="latency section without the busy loop on the other core")
 
 
 # ------------------------------------------------------------------ settings compared
@@ -186,6 +192,8 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.stalls:
+        return _run_stalls(args, out)
     quick = args.quick
     n = 21 if quick else args.grid
     nr = 5 if quick else args.rigid_grid
@@ -355,6 +363,21 @@ def run(args: argparse.Namespace) -> int:
     (out / "solver_tables.txt").write_text("\n".join(texts) + "\n", encoding="utf-8")
     _plot(out / "solver_pareto.png", results, settings, motions, rigid_results, base_points)
     print(f"\ntables: {out / 'solver_tables.txt'}; plot: {out / 'solver_pareto.png'}")
+    return 0
+
+
+def _run_stalls(args, out: Path) -> int:
+    import os
+
+    from ppod_bench.solver_stalls import measure
+
+    load = os.getloadavg()
+    print(f"per-call latency, {'busy loop on the other core' if args.busy else 'no busy loop'}; "
+          f"load average before: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}", flush=True)
+    rows = measure(args.stall_calls, args.busy)
+    text = _table("per-call latency of small calls" + (" with the other core busy" if args.busy else ""),
+                  ["case", "threads", "calls", "p50 ms", "p90 ms", "max ms"], rows)
+    (out / "solver_stalls.txt").write_text(text + "\n", encoding="utf-8")
     return 0
 
 

@@ -220,7 +220,7 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
             since += 1
         if rate < 1.0 and (res / (1.0 - rate) <= 1.0 or (since >= 3 and res <= 5.0)):
             if it > 0:
-                prior[0] = rate
+                prior[0] = _map_rate(Xh, Fh, q, dim, tolv, x, f)
             for j in range(dim):
                 out_v[j] = y[j] / T
                 out_x[j] = x[j]
@@ -238,6 +238,40 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
                 x[j] = Xh[q - 1, j] + Fh[q - 1, j]
             q = 0
     return NOT_CONVERGED, maxp, 0.0, h
+
+
+@njit(cache=True, error_model="numpy")
+def _evenly_spaced(Pall, i, kind):
+    """Whether configurations i - 2, i - 1, i are evenly spaced on a line (to 1e-9 of the step)."""
+    if i < 2:
+        return False
+    o = PP_X if kind == 0 else RP_X
+    dim = 2 if kind == 0 else 3
+    step = 0.0
+    off = 0.0
+    for j in range(dim):
+        d1 = Pall[i - 1, o + j] - Pall[i - 2, o + j]
+        d2 = Pall[i, o + j] - Pall[i - 1, o + j]
+        step = max(step, abs(d1))
+        off = max(off, abs(d2 - d1))
+    return step > 0.0 and off <= 1e-9 * step
+
+
+@njit(cache=True, error_model="numpy")
+def _map_rate(Xh, Fh, q, dim, tolv, x, f):
+    """The one-period map's contraction along its last step, |P(x) - P(x_prev)| / |x - x_prev|
+    (tolerance-scaled max norms; 1 when there is no previous iterate). Not res / previous res,
+    which Anderson acceleration makes far smaller than the map's own rate."""
+    if q < 1:
+        return 1.0
+    num = 0.0
+    den = 0.0
+    for j in range(dim):
+        num = max(num, abs(x[j] + f[j] - Xh[q - 1, j] - Fh[q - 1, j]) / tolv[j])
+        den = max(den, abs(x[j] - Xh[q - 1, j]) / tolv[j])
+    if den <= 0.0:
+        return 1.0
+    return min(1.0, num / den)
 
 
 @njit(cache=True, error_model="numpy")
@@ -324,9 +358,12 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
     xres = np.zeros(dim)
     stats = np.zeros(4)
     warm = np.zeros(dim)
+    warm2 = np.zeros(dim)
     prior = np.ones(1)
     warm_rate = 1.0
     have_warm = False
+    have_warm2 = False
+    last_ok = -2
     h = T / (8.0 * kmax)
     for i in range(lo, hi):
         P = Pall[i]
@@ -371,10 +408,19 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
             P[RP_ZTOL] = max(zero_tol, 100.0 * sc[3])
         else:
             P[PP_KAPPA] = 100.0 * sc[2]
-        # Starting guess: the caller's, else the neighbour's limit cycle, else rest.
+        # Starting guess: the caller's, else the neighbour's limit cycle (extrapolated linearly
+        # from the two before when the configurations are evenly spaced, as along a grid row),
+        # else rest.
+        # (Point parts only: a rigid part's limit cycle can change quickly near unstable lines.)
+        extra = kind == 0 and have_warm and have_warm2 and _evenly_spaced(Pall, i, kind)
         for j in range(dim):
-            x0[j] = X0[i, j] if has_x0[i] else (warm[j] if have_warm else 0.0)
-        prior[0] = R0[i] if has_x0[i] else (warm_rate if have_warm else 1.0)
+            if has_x0[i]:
+                x0[j] = X0[i, j]
+            elif extra:
+                x0[j] = 2.0 * warm[j] - warm2[j]
+            else:
+                x0[j] = warm[j] if have_warm else 0.0
+        prior[0] = 1.0 if kind == 1 else (R0[i] if has_x0[i] else (warm_rate if have_warm else 1.0))
         # Far outside the hull the one-period map only decelerates the part towards it; start
         # at 4 velocity scales instead (the limit cycle is unique for point parts).
         lim = 4.0 * vscale + 1e-12
@@ -428,9 +474,12 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
             out_stick[i] = frac
             if S[S_WARM] > 0.0:
                 for j in range(dim):
+                    warm2[j] = warm[j]
                     warm[j] = xres[j]
                 warm_rate = out_rate[i]
+                have_warm2 = have_warm and last_ok == i - 1
                 have_warm = True
+                last_ok = i
 
 
 @njit(cache=True, error_model="numpy", parallel=True)

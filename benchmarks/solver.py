@@ -29,6 +29,8 @@ HELP = "asymptotic solver: Pareto table vs a converged reference, solve_ivp base
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 POINT_MOTIONS = ["TranslateX", "RotateZ", "LineSinkX", "TwoHarmonicX", "Sink", "Whirlpool", "Swirl3H",
                  "NearContactLoss", "StickingHeavy"]
+#: The extended suite: the motions above plus nearly-collinear, 2-D sticking and plant-corrected ones.
+SUITE_MOTIONS = POINT_MOTIONS + ["LineSinkXNear", "Stick2D", "LineSinkXPlant", "SinkPlant"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -47,6 +49,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="only the per-call latency section (busy loop on the other core, p50/p90)")
     parser.add_argument("--stall-calls", type=int, default=200, metavar="N",
                         help="timed calls per case in the latency section (default 200)")
+    parser.add_argument("--suite", action="store_true",
+                        help="only the extended suite: time per motion on the grid, periods per configuration, "
+                             "error against the independent fixed-step reference")
+    parser.add_argument("--reference-configs", type=int, default=12, metavar="N",
+                        help="configurations per motion checked against the fixed-step reference (default 12)")
+    parser.add_argument("--json", metavar="OUT", help="with --suite: also write the figures as JSON")
     parser.add_argument("--no-busy", dest="busy", action="store_false",
                         help="latency section without the busy loop on the other core")
 
@@ -194,6 +202,8 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if args.stalls:
         return _run_stalls(args, out)
+    if args.suite:
+        return _run_suite(args, out)
     quick = args.quick
     n = 21 if quick else args.grid
     nr = 5 if quick else args.rigid_grid
@@ -363,6 +373,60 @@ def run(args: argparse.Namespace) -> int:
     (out / "solver_tables.txt").write_text("\n".join(texts) + "\n", encoding="utf-8")
     _plot(out / "solver_pareto.png", results, settings, motions, rigid_results, base_points)
     print(f"\ntables: {out / 'solver_tables.txt'}; plot: {out / 'solver_pareto.png'}")
+    return 0
+
+
+def _run_suite(args, out: Path) -> int:
+    """Per motion of the extended suite: grid time (best of --repeat), mean periods per integrated
+    configuration (contact-lost ones excluded), and the max error on a random subset against the
+    independent fixed-step reference (``fixed_step_reference``, 25,600 steps per period)."""
+    import json
+    import os
+
+    from ppod_bench.fixed_step_reference import reference_average
+    from ppod_ros.motion import PlateMotion
+    from ppod_ros.parts import PointPart
+    from ppod_ros.physics import SolverSettings, grid_configs
+    from ppod_ros.physics._params import ensure_compiled
+
+    ensure_compiled()
+    n = args.grid
+    names = args.motions or SUITE_MOTIONS
+    part = PointPart(0.3)
+    xs = np.linspace(-0.1, 0.1, n)
+    cfg = grid_configs(xs, xs)
+    st = SolverSettings(cache=False)
+    rng = np.random.default_rng(args.seed)
+    rows, figures = [], {}
+    load = os.getloadavg()
+    print(f"load average before: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}", flush=True)
+    for name in names:
+        m = PlateMotion.from_yaml(CONFIG / "motions" / f"{name}.yaml")
+        r = _timed(m, part, cfg, st, args.repeat)
+        integrated = r.periods > 0
+        ok = np.flatnonzero(r.valid)
+        pick = np.sort(rng.choice(ok, size=min(args.reference_configs, ok.size), replace=False))
+        err = 0.0
+        tr = time.perf_counter()
+        for i in pick:
+            ref, _ = reference_average(m, part.mu, cfg[i, 0], cfg[i, 1], start=r.cycle_start[i])
+            err = max(err, float(np.abs(ref - r.velocity[i]).max()))
+        tr = time.perf_counter() - tr
+        periods = float(r.periods[integrated].mean()) if integrated.any() else 0.0
+        figures[name] = {"seconds": r.seconds, "periods_per_config": periods, "max_error_mps": err,
+                         "checked_configs": int(pick.size), "invalid": int((~r.valid).sum()),
+                         "stick_fraction_mean": float(np.nanmean(r.stick_fraction)) if ok.size else None}
+        rows.append([name, f"{r.seconds:.3f}", f"{periods:.2f}", f"{err:.1e}", int(pick.size),
+                     int((~r.valid).sum()), f"{np.nanmean(r.stick_fraction):.3f}" if ok.size else "-"])
+        print(f"{name}: {r.seconds:.3f} s, {periods:.2f} periods/config, max err {err:.1e} "
+              f"({pick.size} configs, reference {tr:.1f} s)", flush=True)
+    text = _table(f"extended suite, point part mu 0.3, {n} x {n} grid, default settings; error vs the fixed-step "
+                  f"reference (25,600 steps per period)",
+                  ["motion", "seconds", "periods/config", "max err m/s", "checked", "invalid", "stick frac"], rows)
+    (out / "solver_suite.txt").write_text(text + "\n", encoding="utf-8")
+    if args.json:
+        payload = {"grid": n, "load_average": list(load), "motions": figures}
+        Path(args.json).write_text(json.dumps(payload, indent=1) + "\n", encoding="utf-8")
     return 0
 
 

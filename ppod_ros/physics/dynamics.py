@@ -134,8 +134,9 @@ class PartDynamics:
         self._time = _finite(time_s, "time_s")
         self.parts = parts
         self._lock = threading.Lock()
-        self.setup_seconds = ensure_compiled()
         kinds = np.array([0 if isinstance(p, PointPart) else 1 for p in parts], int)
+        # The serial kernels of the kinds present (the parallel ones load when first needed).
+        self.setup_seconds = ensure_compiled(*sorted({("dyn", int(k), False) for k in kinds})) if kinds.size else 0.0
         self._groups = []
         for kind in (0, 1):
             idx = np.flatnonzero(kinds == kind)
@@ -233,6 +234,7 @@ class PartDynamics:
                     units = int(np.count_nonzero(g.status == lay.OK)) * max(1.0, duration / T)
                     nthreads = _threads.plan(cost_kind, units, self.settings.threads)
                     kernel = advance_group if nthreads > 1 else advance_group_serial
+                    self.setup_seconds += ensure_compiled(("dyn", g.kind, nthreads > 1))
                     tk = time.perf_counter()
                     with _threads.thread_count(nthreads):
                         kernel(g.kind, mc, g.P, g.Y, g.AUX, g.H, t0, t1, T, kmax, tab.A, tab.B, tab.C, tab.E,

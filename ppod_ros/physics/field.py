@@ -372,7 +372,7 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
         store_w = warm
     else:
         raise ConfigError(f"warm: expected a WarmStarts or a bool, got {type(warm).__name__}")
-    setup = ensure_compiled()
+    setup = 0.0
     t_start = time.perf_counter()
     N, dim = cfg.shape[1], cfg.shape[2]
     velocity = np.full((M, N, dim), np.nan)
@@ -413,7 +413,7 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
             X0 = np.take_along_axis(X0, sel[:, :, None], axis=1)
             R0 = np.take_along_axis(R0, sel, axis=1)
             has = np.take_along_axis(has, sel, axis=1)
-        nthreads, out = _run(motions, part, sub, X0, R0, has, settings, progress)
+        nthreads, setup, out = _run(motions, part, sub, X0, R0, has, settings, progress)
         ov, ox, os_, op, of, orate = out
         if sel is None:
             velocity, start, code, periods, stick, rates = ov, ox, os_, op, of, orate
@@ -431,7 +431,7 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
                 store.store((motion.key, part.key, skey), cfg[m, rows], entries)
             if store_w is not None and rows.size:
                 store_w.store(wkey, cfg[m, rows], start[m, rows], rates[m, rows], code[m, rows] == lay.OK)
-    seconds = time.perf_counter() - t_start
+    seconds = time.perf_counter() - t_start - setup
     return FieldsResult(cfg, velocity, code == lay.OK, code, periods, stick, start, seconds, setup, part.kind,
                         settings, tuple(m.name for m in motions), int(M * N - todo), nthreads)
 
@@ -466,7 +466,7 @@ def _miss_rows(miss: np.ndarray) -> np.ndarray:
 
 
 def _run(motions, part, cfg, X0, R0, has, settings, progress):
-    """Solve cfg (M, N, dim) for every motion; returns (threads used, output arrays)."""
+    """Solve cfg (M, N, dim) for every motion; returns (threads used, set-up seconds, outputs)."""
     M, n, dim = cfg.shape
     tables = [motion_table(m, prune=settings.prune_harmonics) for m in motions]
     rows = np.array([t.shape[0] for t in tables], np.int64)
@@ -490,6 +490,7 @@ def _run(motions, part, cfg, X0, R0, has, settings, progress):
     cost_kind = f"field{kind}"
     nthreads = _threads.plan(cost_kind, M * n, settings.threads)
     kernel = solve_motions if nthreads > 1 else solve_motions_serial
+    setup = ensure_compiled(("field", kind, nthreads > 1))
     t0 = time.perf_counter()
     with _threads.thread_count(nthreads):
         # Progress: split into ~20 slices aligned to the chunks (same results as one call).
@@ -509,7 +510,7 @@ def _run(motions, part, cfg, X0, R0, has, settings, progress):
                     o[:, a:b] = part_out
                 progress(M * b, M * n)
     _threads.learn(cost_kind, M * n, time.perf_counter() - t0, nthreads)
-    return nthreads, (out_v, out_x, out_s, out_p, out_f, out_r)
+    return nthreads, setup, (out_v, out_x, out_s, out_p, out_f, out_r)
 
 
 def grid_configs(x: np.ndarray, y: np.ndarray, theta: np.ndarray | None = None) -> np.ndarray:

@@ -360,7 +360,6 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
     warm = np.zeros(dim)
     warm2 = np.zeros(dim)
     prior = np.ones(1)
-    warm_rate = 1.0
     have_warm = False
     have_warm2 = False
     last_ok = -2
@@ -420,7 +419,10 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
                 x0[j] = 2.0 * warm[j] - warm2[j]
             else:
                 x0[j] = warm[j] if have_warm else 0.0
-        prior[0] = 1.0 if kind == 1 else (R0[i] if has_x0[i] else (warm_rate if have_warm else 1.0))
+        # The rate prior only comes with a warm start from an earlier call (solve_fields): a prior
+        # from the neighbour would make the number of periods, hence the result within the
+        # tolerance, jump as the motion changes slightly (finite-difference design Jacobians).
+        prior[0] = R0[i] if (kind == 0 and has_x0[i]) else 1.0
         # Far outside the hull the one-period map only decelerates the part towards it; start
         # at 4 velocity scales instead (the limit cycle is unique for point parts).
         lim = 4.0 * vscale + 1e-12
@@ -476,7 +478,6 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
                 for j in range(dim):
                     warm2[j] = warm[j]
                     warm[j] = xres[j]
-                warm_rate = out_rate[i]
                 have_warm2 = have_warm and last_ok == i - 1
                 have_warm = True
                 last_ok = i

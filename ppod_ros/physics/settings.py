@@ -111,7 +111,7 @@ class SolverSettings:
     prune_harmonics: bool = True
     cache: bool = True
     threads: int | None = None
-    chunk: int = 32
+    chunk: int = 8
     rigid_starts: int = 1
 
     def __post_init__(self) -> None:

@@ -488,7 +488,7 @@ def solve_motions(kind, MC, rows, Pall, X0, has_x0, R0, Ts, kmaxs, A, B, C, E, E
                   out_status, out_periods, out_stick, out_rate):
     """M motions x N configurations, in parallel over (motion, chunk of configurations).
 
-    MC (M, R, 37): motion tables, motion m using its first ``rows[m]`` rows; Pall (M, N, size):
+    MC (M, R, TABLE_COLS): motion tables, motion m using its first ``rows[m]`` rows; Pall (M, N, size):
     parameter rows (written to: one copy per motion); X0, out_v, out_x (M, N, dim); has_x0, R0,
     out_* (M, N); Ts, kmaxs (M,): periods and highest harmonics.
     """

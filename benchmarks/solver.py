@@ -4,13 +4,19 @@ scipy.integrate.solve_ivp baseline; what the skipping saves; full-dynamics speed
 Point parts (mu 0.3) on a 51 x 51 grid over [-0.1, 0.1]^2 m for every suite motion of
 config/motions; the PHYSICS.md rigid part on 7 x 7 x 7 configurations under RigidU1. The reference
 is the solver's "reference" preset (8th-order Dormand-Prince, step tolerance 1e-12, the closed form
-switched off so that collinear motions are checked against integration too), cached under --out
-keyed by its settings, motion, part and grid. The baseline is what a user would write: solve_ivp
-(RK45, rtol 1e-9, atol 1e-12) on s' = -mu n w/|w|, period after period until the period average
-changes by less than 1e-8 m/s or 200 periods, on a fixed random subset of valid configurations.
+where a_h is collinear), cached under --out keyed by its settings, motion, part and grid; --suite
+judges the extended suite against an independent fixed-step reference instead
+(fixed_step_reference.py, 25,600 steps per period). The baseline is a lean solve_ivp user code
+(RK45, rtol 1e-9, atol 1e-12; the plate's coefficients precomputed, numpy only in the right-hand
+side) on s' = -mu n w/|w|, period after period until the period average changes by less than
+1e-8 m/s or 200 periods, on a fixed random subset of valid configurations; ratios compare the same
+configurations at equal or better error. --stalls measures the per-call latency of small calls
+with a bounded busy loop on the other core.
 
 examples:
   ppod bench solver --quick
+  ppod bench solver --stalls
+  ppod bench solver --suite --json out/bench/suite.json
   ppod bench solver --out out/bench
   ppod bench solver --baseline-configs 10 --motions Sink LineSinkX
 """
@@ -19,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import math
 import time
 from pathlib import Path
 
@@ -29,6 +36,8 @@ HELP = "asymptotic solver: Pareto table vs a converged reference, solve_ivp base
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 POINT_MOTIONS = ["TranslateX", "RotateZ", "LineSinkX", "TwoHarmonicX", "Sink", "Whirlpool", "Swirl3H",
                  "NearContactLoss", "StickingHeavy"]
+#: The extended suite: the motions above plus nearly-collinear, 2-D sticking and plant-corrected ones.
+SUITE_MOTIONS = POINT_MOTIONS + ["LineSinkXNear", "Stick2D", "LineSinkXPlant", "SinkPlant"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -43,6 +52,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "RK45 chatter, and a capped run gives a lower bound on the ratio")
     parser.add_argument("--repeat", type=int, default=3, help="timed repetitions, best kept (default 3)")
     parser.add_argument("--seed", type=int, default=2024, help="seed of the baseline subset")
+    parser.add_argument("--stalls", action="store_true",
+                        help="only the per-call latency section (busy loop on the other core, p50/p90)")
+    parser.add_argument("--stall-calls", type=int, default=200, metavar="N",
+                        help="timed calls per case in the latency section (default 200)")
+    parser.add_argument("--suite", action="store_true",
+                        help="only the extended suite: time per motion on the grid, periods per configuration, "
+                             "error against the independent fixed-step reference")
+    parser.add_argument("--reference-configs", type=int, default=12, metavar="N",
+                        help="configurations per motion checked against the fixed-step reference (default 12)")
+    parser.add_argument("--json", metavar="OUT", help="with --suite: also write the figures as JSON")
+    parser.add_argument("--no-busy", dest="busy", action="store_false",
+                        help="latency section without the busy loop on the other core")
 
 
 # ------------------------------------------------------------------ settings compared
@@ -136,18 +157,34 @@ def baseline_average(motion, mu, x, y, budget_s=float("inf")):
     """
     from scipy.integrate import solve_ivp
 
-    from ppod_ros.motion import point_kinematics
-
     T = motion.period_s
     deadline = time.perf_counter() + budget_s
+    # The plate at (x, y), precomputed once: a_n = sum An_k sin(w_k t + pn_k), v_h likewise.
+    amp = np.asarray(motion.amplitude, float)
+    ph = np.asarray(motion.phase, float)
+    w = motion.omega * np.asarray(motion.k, float)
+    def combine(c, cx, cy):  # amplitude/phase of c u_j + cx u_5 (or alpha terms) as one sinusoid
+        z = (amp[:, c[0]] * np.exp(1j * ph[:, c[0]]) * c[1] + amp[:, cx[0]] * np.exp(1j * ph[:, cx[0]]) * cx[1]
+             + amp[:, cy[0]] * np.exp(1j * ph[:, cy[0]]) * cy[1])
+        return z
+    zn = combine((2, 1.0), (3, y), (4, -x))            # a_n = u2 + u3 y - u4 x
+    zvx = combine((0, 1.0), (5, -y), (5, 0.0)) / w     # v_h = integral of a_h (zero mean)
+    zvy = combine((1, 1.0), (5, x), (5, 0.0)) / w
+    mu_g = mu * 9.81
 
     def rhs(t, s):
         if time.perf_counter() > deadline:
             raise _OutOfTimeError
-        k = point_kinematics(motion, x, y, t)
-        w = s - k["v_h"]
-        nw = np.hypot(w[0], w[1])
-        return -mu * (9.81 + k["a_n"]) * (w / nw if nw > 0 else 0.0 * w)
+        e = np.exp(1j * w * t)
+        n_acc = float((zn * e).imag.sum())
+        vx = float(-(zvx * e).real.sum())
+        vy = float(-(zvy * e).real.sum())
+        wx, wy = s[0] - vx, s[1] - vy
+        nw = math.hypot(wx, wy)
+        if nw == 0.0:
+            return np.zeros(2)
+        f = -(mu_g + mu * n_acc) / nw
+        return np.array([f * wx, f * wy])
 
     s = np.zeros(2)
     last = np.full(2, np.nan)
@@ -186,6 +223,10 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.stalls:
+        return _run_stalls(args, out)
+    if args.suite:
+        return _run_suite(args, out)
     quick = args.quick
     n = 21 if quick else args.grid
     nr = 5 if quick else args.rigid_grid
@@ -278,7 +319,8 @@ def run(args: argparse.Namespace) -> int:
             rows.append([name, len(sub), f"{t_base:.3f}", f"{e_base:.1e}", "-", "-", "-", "-", "-"])
             continue
         t_ours = best[1] / len(sub)
-        t_grid = results[("default", name)][0] / len(cfg)
+        r_grid = results[("default", name)][2]
+        t_grid = r_grid.seconds / max(1, int((r_grid.periods > 0).sum()))  # contact-lost ones excluded
         base_points.append((t_base, e_base))
         bound = ">=" if capped else ""
         rows.append([name, f"{len(sub)}" + (f" ({capped} capped)" if capped else ""), f"{bound}{t_base:.3f}",
@@ -286,7 +328,8 @@ def run(args: argparse.Namespace) -> int:
                      f"{bound}{t_base / t_ours:.0f}", f"{bound}{t_base / t_grid:.0f}"])
     texts.append(_table("solve_ivp baseline (RK45 1e-9/1e-12, period averages to 1e-8 m/s) vs this solver",
                         ["motion", "configs", "baseline s/config", "baseline max err", "ours: cheapest at <= err",
-                         "ours ms/config", "ours max err", "ratio (same configs)", "ratio (default, grid)"], rows))
+                         "ours ms/config", "ours max err", "ratio (same configs)",
+                         "ratio (default, grid, integrated configs only)"], rows))
 
     # --- skipping ------------------------------------------------------------------------------------
     rows = []
@@ -355,6 +398,75 @@ def run(args: argparse.Namespace) -> int:
     (out / "solver_tables.txt").write_text("\n".join(texts) + "\n", encoding="utf-8")
     _plot(out / "solver_pareto.png", results, settings, motions, rigid_results, base_points)
     print(f"\ntables: {out / 'solver_tables.txt'}; plot: {out / 'solver_pareto.png'}")
+    return 0
+
+
+def _run_suite(args, out: Path) -> int:
+    """Per motion of the extended suite: grid time (best of --repeat), mean periods per integrated
+    configuration (contact-lost ones excluded), and the max error on a random subset against the
+    independent fixed-step reference (``fixed_step_reference``, 25,600 steps per period)."""
+    import json
+    import os
+
+    from ppod_bench.fixed_step_reference import reference_average
+    from ppod_ros.motion import PlateMotion
+    from ppod_ros.parts import PointPart
+    from ppod_ros.physics import SolverSettings, grid_configs
+    from ppod_ros.physics._params import ensure_compiled
+
+    ensure_compiled()
+    n = args.grid
+    names = args.motions or SUITE_MOTIONS
+    part = PointPart(0.3)
+    xs = np.linspace(-0.1, 0.1, n)
+    cfg = grid_configs(xs, xs)
+    st = SolverSettings(cache=False)
+    rng = np.random.default_rng(args.seed)
+    rows, figures = [], {}
+    load = os.getloadavg()
+    print(f"load average before: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}", flush=True)
+    for name in names:
+        m = PlateMotion.from_yaml(CONFIG / "motions" / f"{name}.yaml")
+        r = _timed(m, part, cfg, st, args.repeat)
+        integrated = r.periods > 0
+        ok = np.flatnonzero(r.valid)
+        pick = np.sort(rng.choice(ok, size=min(args.reference_configs, ok.size), replace=False))
+        err = 0.0
+        tr = time.perf_counter()
+        for i in pick:
+            ref, _ = reference_average(m, part.mu, cfg[i, 0], cfg[i, 1], start=r.cycle_start[i])
+            err = max(err, float(np.abs(ref - r.velocity[i]).max()))
+        tr = time.perf_counter() - tr
+        periods = float(r.periods[integrated].mean()) if integrated.any() else 0.0
+        figures[name] = {"seconds": r.seconds, "periods_per_config": periods, "max_error_mps": err,
+                         "checked_configs": int(pick.size), "invalid": int((~r.valid).sum()),
+                         "stick_fraction_mean": float(np.nanmean(r.stick_fraction)) if ok.size else None}
+        rows.append([name, f"{r.seconds:.3f}", f"{periods:.2f}", f"{err:.1e}", int(pick.size),
+                     int((~r.valid).sum()), f"{np.nanmean(r.stick_fraction):.3f}" if ok.size else "-"])
+        print(f"{name}: {r.seconds:.3f} s, {periods:.2f} periods/config, max err {err:.1e} "
+              f"({pick.size} configs, reference {tr:.1f} s)", flush=True)
+    text = _table(f"extended suite, point part mu 0.3, {n} x {n} grid, default settings; error vs the fixed-step "
+                  f"reference (25,600 steps per period)",
+                  ["motion", "seconds", "periods/config", "max err m/s", "checked", "invalid", "stick frac"], rows)
+    (out / "solver_suite.txt").write_text(text + "\n", encoding="utf-8")
+    if args.json:
+        payload = {"grid": n, "load_average": list(load), "motions": figures}
+        Path(args.json).write_text(json.dumps(payload, indent=1) + "\n", encoding="utf-8")
+    return 0
+
+
+def _run_stalls(args, out: Path) -> int:
+    import os
+
+    from ppod_bench.solver_stalls import measure
+
+    load = os.getloadavg()
+    print(f"per-call latency, {'busy loop on the other core' if args.busy else 'no busy loop'}; "
+          f"load average before: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}", flush=True)
+    rows = measure(args.stall_calls, args.busy)
+    text = _table("per-call latency of small calls" + (" with the other core busy" if args.busy else ""),
+                  ["case", "threads", "calls", "p50 ms", "p90 ms", "max ms"], rows)
+    (out / "solver_stalls.txt").write_text(text + "\n", encoding="utf-8")
     return 0
 
 

@@ -12,6 +12,10 @@ examples:
   ppod field config/motions/RigidU1.yaml --part config/parts/published_rigid.yaml \\
       --x -0.06 0.06 7 --y -0.06 0.06 7 --theta 0 6.2832 16 --plot rigid.png
   ppod field config/motions/Swirl3H.yaml --preset accurate --json - > field.json
+  ppod field config/motions/Sink.yaml config/motions/Whirlpool.yaml --json fields/
+
+Several motion files are solved in one call (one start-up); --json and --plot then name a
+directory that gets one NAME.json / NAME.png per motion file ('--json -': one JSON object per line).
 """
 
 from __future__ import annotations
@@ -33,7 +37,8 @@ MAX_CONFIGS = 1_000_000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("motion", metavar="MOTION.yaml", help="plate motion (FORMATS.md)")
+    parser.add_argument("motion", metavar="MOTION.yaml", nargs="+",
+                        help="plate motion (FORMATS.md); several: one field per file")
     parser.add_argument("--part", metavar="PART.yaml",
                         help="part description (default: a point part, mu 0.3)")
     parser.add_argument("--mu", metavar="MU", help="friction coefficient of the default point part")
@@ -60,7 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help="periods per configuration before 'not converged'")
     s.add_argument("--friction-eps", dest="friction_eps_mps",
                    help="rigid parts: regularisation speed (m/s)")
-    s.add_argument("--threads", help="worker threads (default: all cores)")
+    s.add_argument("--threads", help="worker threads (default: all cores for large grids, 1 for small ones)")
     s.add_argument("--no-closed-form", dest="closed_form", action="store_false", default=None,
                    help="integrate also where the closed form applies")
     s.add_argument("--no-cache", dest="cache", action="store_false", default=None,
@@ -125,7 +130,13 @@ def run(args: argparse.Namespace) -> int:
     from ppod_ros.parts import PointPart, load_part
     from ppod_ros.physics import grid_configs, solve_field
 
-    motion = PlateMotion.from_yaml(args.motion)
+    paths = list(args.motion) if isinstance(args.motion, (list, tuple)) else [args.motion]
+    motions = [PlateMotion.from_yaml(p) for p in paths]
+    several = len(motions) > 1
+    stems = [Path(p).stem for p in paths]
+    if several and len(set(stems)) < len(stems):
+        raise ConfigError(f"MOTION.yaml: several files share a name ({', '.join(stems)}); their outputs would "
+                          f"overwrite each other")
     part = load_part(args.part) if args.part else PointPart(0.3)
     if args.mu is not None:
         if part.kind != "point":
@@ -156,13 +167,16 @@ def run(args: argparse.Namespace) -> int:
     settings = _settings(args)
     progress = None
     cost = 1 if part.kind == "point" else 20
-    if not args.quiet and len(configs) * cost > _PROGRESS_WORK:
+    if not args.quiet and len(motions) * len(configs) * cost > _PROGRESS_WORK:
         t0 = time.perf_counter()
 
         def progress(done: int, total: int) -> None:
             print(f"ppod field: {100 * done // total:3d}% ({done}/{total} configurations, "
                   f"{time.perf_counter() - t0:.1f} s)", file=sys.stderr, flush=True)
 
+    if several:
+        return _run_several(args, motions, stems, part, configs, settings, progress)
+    motion = motions[0]
     result = _finite_only(solve_field(motion, part, configs, settings, progress=progress))
     if args.json:
         text = result.to_json()
@@ -197,6 +211,47 @@ def _finite_only(result):
     valid = result.valid & ~bad
     codes = np.where(bad, layout.NOT_CONVERGED, result.reason_code)
     return dataclasses.replace(result, valid=valid, reason_code=codes)
+
+
+def _run_several(args, motions, stems, part, configs, settings, progress) -> int:
+    """Several motion files: one solver call; one table / JSON / plot per motion."""
+    from ppod_ros.errors import ConfigError
+    from ppod_ros.physics import solve_fields
+
+    batch = solve_fields(motions, part, configs, settings, progress=progress, warm=False)
+    out_dirs = {}
+    for flag in ("json", "plot"):
+        dest = getattr(args, flag)
+        if dest and dest != "-":
+            out_dirs[flag] = Path(dest)
+            try:
+                out_dirs[flag].mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise ConfigError(f"--{flag} {dest}: with several motion files this is a directory; "
+                                  f"cannot create it: {exc.strerror or exc}") from exc
+    if args.plot == "-":
+        raise ConfigError("--plot: with several motion files give a directory, not '-'")
+    for m, (motion, stem) in enumerate(zip(motions, stems)):
+        result = _finite_only(batch.field(m))
+        if args.json == "-":
+            print(result.to_json())
+        elif args.json:
+            target = out_dirs["json"] / f"{stem}.json"
+            try:
+                target.write_text(result.to_json() + "\n", encoding="utf-8")
+            except OSError as exc:
+                raise ConfigError(f"--json {target}: cannot write: {exc.strerror or exc}") from exc
+        else:
+            print(format_table(result, motion))
+        if args.plot:
+            from ppod_ros.physics.plot import plot_field
+
+            plot_field(result, motion, str(out_dirs["plot"] / f"{stem}.png"), part_label=_part_label(part))
+    if not args.quiet:
+        print(f"ppod field: {len(motions)} motions x {configs.shape[0]} configurations, "
+              f"{int(batch.valid.sum())} valid, {batch.seconds:.3f} s solver (+{batch.setup_seconds:.2f} s "
+              f"set-up)", file=sys.stderr)
+    return 0
 
 
 def _part_label(part) -> str:

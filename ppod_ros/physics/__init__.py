@@ -5,6 +5,10 @@ Public API (stable; see docs/solver.md):
 - :func:`solve_field` -> :class:`FieldResult`: asymptotic velocity (point part) or twist (rigid
   part) at many configurations, compiled and parallel; invalid configurations are flagged with a
   reason, never returned as numbers.
+- :func:`solve_fields` -> :class:`FieldsResult`: many motions x many configurations in one compiled
+  call (shared (N, d) or per-motion (M, N, d) configurations), serial or parallel by size (no
+  thread wake-up stalls on a busy machine) and warm-started from previous calls
+  (:data:`WARM_STARTS`).
 - :class:`SolverSettings`, :data:`PRESETS`, :func:`preset`: tolerances, integrator and fixed-point
   method by name.
 - :class:`PartDynamics`: full dynamics of many parts with evolving configurations, advanced in
@@ -17,7 +21,17 @@ Nothing here imports rclpy or message types.
 
 from ppod_ros.physics.cycle import limit_cycle
 from ppod_ros.physics.dynamics import DynamicsState, PartDynamics
-from ppod_ros.physics.field import FIELD_CACHE, FieldCache, FieldResult, grid_configs, solve_field
+from ppod_ros.physics.field import (
+    FIELD_CACHE,
+    WARM_STARTS,
+    FieldCache,
+    FieldResult,
+    FieldsResult,
+    WarmStarts,
+    grid_configs,
+    solve_field,
+    solve_fields,
+)
 from ppod_ros.physics.settings import (
     FIXED_POINT_METHODS,
     INTEGRATORS,
@@ -33,13 +47,17 @@ __all__ = [
     "INTEGRATORS",
     "PRESETS",
     "REASONS",
+    "WARM_STARTS",
     "DynamicsState",
     "FieldCache",
     "FieldResult",
+    "FieldsResult",
     "PartDynamics",
     "SolverSettings",
+    "WarmStarts",
     "grid_configs",
     "limit_cycle",
     "preset",
     "solve_field",
+    "solve_fields",
 ]

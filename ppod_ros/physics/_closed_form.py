@@ -27,8 +27,10 @@ from ppod_ros.physics.plate import G
 
 
 @njit(cache=True, error_model="numpy")
-def collinear_direction(mc, x, y):
-    """(is_collinear, ex, ey): whether a_h at (x, y) keeps one direction for all t, and that direction."""
+def principal_direction(mc, x, y):
+    """(is_collinear, ex, ey, across): the principal direction e of a_h at (x, y) over the cycle,
+    the fraction ``across`` of a_h's energy perpendicular to it (0 <= across <= 0.5), and whether
+    that is below (1e-10)^2 (collinear: a_h keeps one direction for all t)."""
     gxx = 0.0
     gxy = 0.0
     gyy = 0.0
@@ -41,7 +43,7 @@ def collinear_direction(mc, x, y):
             gyy += ay * ay
     tr = gxx + gyy
     if tr == 0.0:
-        return True, 1.0, 0.0
+        return True, 1.0, 0.0, 0.0
     ang = 0.5 * math.atan2(2.0 * gxy, gxx - gyy)
     ex = math.cos(ang)
     ey = math.sin(ang)
@@ -54,8 +56,8 @@ def collinear_direction(mc, x, y):
             ay = mc[r, off + 1] + mc[r, off + 5] * x
             perp += (ex * ay - ey * ax) ** 2
     if perp > 1e-20 * tr:
-        return False, 1.0, 0.0
-    return True, ex, ey
+        return False, ex, ey, perp / tr
+    return True, ex, ey, perp / tr
 
 
 @njit(cache=True, error_model="numpy")

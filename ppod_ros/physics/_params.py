@@ -1,9 +1,10 @@
 """Parameter rows for the compiled kernels, configuration checks, and one-time compilation.
 
-:func:`ensure_compiled` compiles (or loads from numba's on-disk cache) every kernel once per process
-by running them on a tiny problem; the time it took is the solver's ``setup_seconds``. Numba
-writes its cache next to the sources (``__pycache__``) or, when that is read-only, to its user-wide
-cache directory (``NUMBA_CACHE_DIR``); either way nothing here depends on the cache being writable.
+:func:`ensure_compiled` compiles (or loads from numba's on-disk cache) the kernels a call needs
+(default: all) once per process by running them on a tiny problem; the time it took is the
+solver's ``setup_seconds``. Numba writes its cache next to the sources (``__pycache__``) or, when
+that is read-only, to its user-wide cache directory (``NUMBA_CACHE_DIR``); either way nothing here
+depends on the cache being writable.
 """
 
 from __future__ import annotations
@@ -82,17 +83,30 @@ def rigid_rows(part: RigidPart, configs: np.ndarray, eps_mps: float, evolve: boo
     return P
 
 
-def ensure_compiled() -> float:
-    """Compile or load every kernel once; returns the seconds that took (0 after the first call)."""
-    global _setup_seconds
+#: Every kernel: (family, part kind, parallel). "field": the asymptotic solver; "dyn": full dynamics.
+ALL_KERNELS = tuple((fam, kind, par) for fam in ("field", "dyn") for kind in (0, 1) for par in (False, True))
+_warmed: set[tuple[str, int, bool]] = set()
+_stale_checked = False
+
+
+def ensure_compiled(*kernels: tuple[str, int, bool]) -> float:
+    """Compile or load the given kernels (default: all) once per process; returns the seconds that
+    took (0 when they were ready). Loading only what a call uses keeps small CLI calls short."""
+    global _setup_seconds, _stale_checked
+    want = kernels or ALL_KERNELS
     with _lock:
-        if _setup_seconds is not None:
+        todo = [k for k in want if k not in _warmed]
+        if not todo:
             return 0.0
         t0 = time.perf_counter()
-        _drop_stale_cache()
-        _warm_up()
-        _setup_seconds = time.perf_counter() - t0
-        return _setup_seconds
+        if not _stale_checked:
+            _drop_stale_cache()
+            _stale_checked = True
+        _warm_up(todo)
+        _warmed.update(todo)
+        spent = time.perf_counter() - t0
+        _setup_seconds = (_setup_seconds or 0.0) + spent
+        return spent
 
 
 def _drop_stale_cache() -> None:
@@ -131,7 +145,7 @@ def setup_seconds_total() -> float:
     return _setup_seconds or 0.0
 
 
-def _warm_up() -> None:
+def _warm_up(todo) -> None:
     # Import here: the kernels' modules compile lazily on first call.
     from ppod_ros.motion import PlateMotion
     from ppod_ros.parts import published_rigid_part
@@ -151,9 +165,15 @@ def _warm_up() -> None:
         dim = configs.shape[1]
         P = point_rows(part, configs) if kind == 0 else rigid_rows(part, configs, settings.friction_eps_mps)
         n = configs.shape[0]
-        out_v = np.zeros((n, dim))
-        out_x = np.zeros((n, dim))
-        _solve.solve_batch(kind, mc, P, np.zeros((n, dim)), np.zeros(n, np.bool_), motion.period_s, 1,
-                           tab.A, tab.B, tab.C, tab.E, tab.E3, S, out_v, out_x, np.zeros(n, np.int64),
-                           np.zeros(n, np.int64), np.zeros(n))
-        _dynamics_kernel.warm_up(kind, mc, P, dim, tab, S, motion.period_s)
+        R = np.ones((1, n))
+        for par, kernel in ((False, _solve.solve_motions_serial), (True, _solve.solve_motions)):
+            if ("field", kind, par) not in todo:
+                continue
+            kernel(kind, mc[None], np.array([mc.shape[0]], np.int64), P[None].copy(), np.zeros((1, n, dim)),
+                   np.zeros((1, n), np.bool_), R, np.array([motion.period_s]), np.array([1], np.int64),
+                   tab.A, tab.B, tab.C, tab.E, tab.E3, S, np.zeros((1, n, dim)), np.zeros((1, n, dim)),
+                   np.zeros((1, n), np.int64), np.zeros((1, n), np.int64), np.zeros((1, n)), np.ones((1, n)))
+        dyn = tuple(k for par, k in ((False, _dynamics_kernel.advance_group_serial),
+                                     (True, _dynamics_kernel.advance_group)) if ("dyn", kind, par) in todo)
+        if dyn:
+            _dynamics_kernel.warm_up(kind, mc, P, dim, tab, S, motion.period_s, dyn)

@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit, prange
 
 from ppod_ros.physics._advance import advance, point_init, rigid_init, zero_tolerance
-from ppod_ros.physics._closed_form import collinear_direction, line_solve, line_table
+from ppod_ros.physics._closed_form import line_solve, line_table, principal_direction
 from ppod_ros.physics._contact import gauss_solve, point_plate, rigid_geometry, stick_forces
 from ppod_ros.physics._layout import (
     AX_SIZE,
@@ -71,6 +71,14 @@ from ppod_ros.physics._layout import (
     W_U,
 )
 from ppod_ros.physics.plate import min_normal_accel, plate_eval, point_velocity_scale
+
+#: A neighbour's (or a previous call's) contraction rate times this is the first period's rate
+#: estimate; never below RATE_PRIOR_MIN (a map that contracted to nothing there may not here).
+RATE_PRIOR_SAFETY = 2.0
+RATE_PRIOR_MIN = 0.1
+#: Point parts whose a_h is collinear up to this fraction of its energy start the integrated
+#: fixed point from the closed form along the principal direction (the nearly-collinear case).
+NEAR_COLLINEAR_ENERGY = 1e-2
 
 # ------------------------------------------------------------------ checks before integrating
 
@@ -159,8 +167,12 @@ def rigid_scales(mc, P, sx, sy, W):
 
 @njit(cache=True, error_model="numpy")
 def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, n, dim, tolv,
-                zero_tol, vlim, wlim, out_v, out_x, stats):
-    """Returns (status, periods, sticking fraction of the final period, step size)."""
+                zero_tol, vlim, wlim, out_v, out_x, stats, prior):
+    """Returns (status, periods, sticking fraction of the final period, step size).
+
+    ``prior[0]`` is a prior estimate of the map's contraction rate (from a neighbouring
+    configuration or a previous call; >= 1: none) used for the first period's convergence test,
+    and ends as the rate estimated here (a prior for the next configuration)."""
     depth = int(S[S_DEPTH])
     maxp = int(S[S_MAX_PERIODS])
     max_steps = int(S[S_MAX_STEPS])
@@ -196,7 +208,9 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
         # contracts by ``rate``, estimated from the last two residuals: so at least two periods
         # (a weakly contracting map, e.g. tiny friction or huge amplitudes, has small residuals far
         # from its fixed point).
-        rate = min(0.999, res / prev) if it > 0 else 1.0
+        # A prior rate (from a neighbour or a previous call, with a safety factor) lets a good warm
+        # start converge in one period.
+        rate = min(0.999, res / prev) if it > 0 else min(1.0, max(RATE_PRIOR_SAFETY * prior[0], RATE_PRIOR_MIN))
         # Converged; or stalled just above the tolerance, at the period map's own noise (set by the
         # step tolerance): iterating on would not make the result any better.
         if res < best:
@@ -204,7 +218,9 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
             since = 0
         else:
             since += 1
-        if res / (1.0 - rate) <= 1.0 or (since >= 3 and res <= 5.0):
+        if rate < 1.0 and (res / (1.0 - rate) <= 1.0 or (since >= 3 and res <= 5.0)):
+            if it > 0:
+                prior[0] = _map_rate(Xh, Fh, q, dim, tolv, x, f)
             for j in range(dim):
                 out_v[j] = y[j] / T
                 out_x[j] = x[j]
@@ -222,6 +238,40 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
                 x[j] = Xh[q - 1, j] + Fh[q - 1, j]
             q = 0
     return NOT_CONVERGED, maxp, 0.0, h
+
+
+@njit(cache=True, error_model="numpy")
+def _evenly_spaced(Pall, i, kind):
+    """Whether configurations i - 2, i - 1, i are evenly spaced on a line (to 1e-9 of the step)."""
+    if i < 2:
+        return False
+    o = PP_X if kind == 0 else RP_X
+    dim = 2 if kind == 0 else 3
+    step = 0.0
+    off = 0.0
+    for j in range(dim):
+        d1 = Pall[i - 1, o + j] - Pall[i - 2, o + j]
+        d2 = Pall[i, o + j] - Pall[i - 1, o + j]
+        step = max(step, abs(d1))
+        off = max(off, abs(d2 - d1))
+    return step > 0.0 and off <= 1e-9 * step
+
+
+@njit(cache=True, error_model="numpy")
+def _map_rate(Xh, Fh, q, dim, tolv, x, f):
+    """The one-period map's contraction along its last step, |P(x) - P(x_prev)| / |x - x_prev|
+    (tolerance-scaled max norms; 1 when there is no previous iterate). Not res / previous res,
+    which Anderson acceleration makes far smaller than the map's own rate."""
+    if q < 1:
+        return 1.0
+    num = 0.0
+    den = 0.0
+    for j in range(dim):
+        num = max(num, abs(x[j] + f[j] - Xh[q - 1, j] - Fh[q - 1, j]) / tolv[j])
+        den = max(den, abs(x[j] - Xh[q - 1, j]) / tolv[j])
+    if den <= 0.0:
+        return 1.0
+    return min(1.0, num / den)
 
 
 @njit(cache=True, error_model="numpy")
@@ -287,119 +337,188 @@ def _anderson(Xh, Fh, q, dim, tolv, x):
 # ------------------------------------------------------------------ all configurations
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
-def solve_batch(kind, mc, Pall, X0, has_x0, T, kmax, A, B, C, E, E3, S, out_v, out_x, out_status,
-                out_periods, out_stick):
-    N = Pall.shape[0]
+@njit(cache=True, error_model="numpy")
+def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_v, out_x, out_status,
+                out_periods, out_stick, out_rate, lo, hi):
+    """Configurations ``lo .. hi - 1`` in order (with ``warm`` on, each starts from the previous
+    one's limit cycle and contraction rate). ``R0`` holds prior contraction rates for rows with
+    ``has_x0`` (>= 1: none); ``out_rate`` the rates estimated here (1: none, e.g. closed form)."""
     dim = 2 if kind == 0 else 3
     n = 2 * dim
+    nscan = int(S[S_NSCAN]) * kmax
+    K = np.zeros((B.shape[0] + 1, n))
+    ytmp = np.zeros(n)
+    ynew = np.zeros(n)
+    ybest = np.zeros(n)
+    W = np.zeros(W_SIZE)
+    sc = np.zeros(n)
+    tolv = np.zeros(dim)
+    x0 = np.zeros(dim)
+    vres = np.zeros(dim)
+    xres = np.zeros(dim)
+    stats = np.zeros(4)
+    warm = np.zeros(dim)
+    warm2 = np.zeros(dim)
+    prior = np.ones(1)
+    have_warm = False
+    have_warm2 = False
+    last_ok = -2
+    h = T / (8.0 * kmax)
+    for i in range(lo, hi):
+        P = Pall[i]
+        for j in range(dim):
+            out_v[i, j] = np.nan
+            out_x[i, j] = np.nan
+        out_stick[i] = np.nan
+        out_periods[i] = 0
+        out_rate[i] = 1.0
+        if kind == 0:
+            px = P[PP_X]
+            py = P[PP_Y]
+        else:
+            px = P[RP_X]
+            py = P[RP_Y]
+        if min_normal_accel(mc, px, py, T, 4 * nscan) <= 0.0:
+            out_status[i] = CONTACT_LOST
+            continue
+        if kind == 0:
+            vscale = point_velocity_scale(mc, px, py)
+            wscale = 0.0
+            can = True if S[S_SKIP_STICK] <= 0.0 else point_can_stick(mc, P, px, py, T, nscan, W)
+            P[PP_CANSTICK] = 1.0 if can else 0.0
+            P[PP_VSCALE] = vscale
+        else:
+            rigid_geometry(P, P[RP_TH], W)
+            vscale, wscale = rigid_scales(mc, P, px, py, W)
+            can = True if S[S_SKIP_STICK] <= 0.0 else rigid_can_stick(mc, P, px, py, T, nscan, W)
+            P[RP_CANSTICK] = 1.0 if can else 0.0
+            P[RP_VSCALE] = vscale
+            P[RP_WSCALE] = wscale
+        for j in range(dim):
+            sc[j] = 0.0
+            if kind == 1 and j == 2:
+                sc[dim + j] = S[S_RTOL] * wscale + S[S_ATOL_W]
+                tolv[j] = S[S_FP_RTOL] * wscale + S[S_FP_ATOL_W]
+            else:
+                sc[dim + j] = S[S_RTOL] * vscale + S[S_ATOL_V]
+                tolv[j] = S[S_FP_RTOL] * vscale + S[S_FP_ATOL_V]
+        zero_tol = zero_tolerance(S, vscale)
+        if kind == 1:
+            P[RP_ZTOL] = max(zero_tol, 100.0 * sc[3])
+        else:
+            P[PP_KAPPA] = 100.0 * sc[2]
+        # Starting guess: the caller's, else the neighbour's limit cycle (extrapolated linearly
+        # from the two before when the configurations are evenly spaced, as along a grid row),
+        # else rest.
+        # (Point parts only: a rigid part's limit cycle can change quickly near unstable lines.)
+        extra = kind == 0 and have_warm and have_warm2 and _evenly_spaced(Pall, i, kind)
+        for j in range(dim):
+            if has_x0[i]:
+                x0[j] = X0[i, j]
+            elif extra:
+                x0[j] = 2.0 * warm[j] - warm2[j]
+            else:
+                x0[j] = warm[j] if have_warm else 0.0
+        # The rate prior only comes with a warm start from an earlier call (solve_fields): a prior
+        # from the neighbour would make the number of periods, hence the result within the
+        # tolerance, jump as the motion changes slightly (finite-difference design Jacobians).
+        prior[0] = R0[i] if (kind == 0 and has_x0[i]) else 1.0
+        # Far outside the hull the one-period map only decelerates the part towards it; start
+        # at 4 velocity scales instead (the limit cycle is unique for point parts).
+        lim = 4.0 * vscale + 1e-12
+        sp = math.hypot(x0[0], x0[1])
+        if sp > lim:
+            x0[0] *= lim / sp
+            x0[1] *= lim / sp
+        if kind == 1 and abs(x0[2]) > 4.0 * wscale + 1e-12:
+            x0[2] = math.copysign(4.0 * wscale, x0[2])
+        st = OK
+        near = 1.0
+        if kind == 0 and S[S_CLOSED_FORM] > 0.0:
+            lin, ex, ey, near = principal_direction(mc, px, py)
+        else:
+            lin, ex, ey = False, 1.0, 0.0
+        if not lin and near <= NEAR_COLLINEAR_ENERGY and not has_x0[i]:
+            # Nearly collinear: the closed form along the principal direction is a close start.
+            c1 = line_table(mc, px, py, ex, ey)
+            st0, _, lam_start, _ = line_solve(
+                c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats)
+            if st0 == OK:
+                x0[0] = lam_start * ex
+                x0[1] = lam_start * ey
+        if lin:
+            c1 = line_table(mc, px, py, ex, ey)
+            st, lam_avg, lam_start, periods = line_solve(
+                c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats)
+            vres[0] = lam_avg * ex
+            vres[1] = lam_avg * ey
+            xres[0] = lam_start * ex
+            xres[1] = lam_start * ey
+            frac = stats[0] / T
+        else:
+            st, periods, frac, h = fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew,
+                                               ybest, W, sc, n, dim, tolv, zero_tol,
+                                               (1.0 if kind == 0 else 2.0) * vscale + 1e-12,
+                                               2.0 * wscale + 1e-12, vres, xres, stats, prior)
+            if st == OK and kind == 1 and S[S_STARTS] > 1.5:
+                st, extra = _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc,
+                                          tolv, zero_tol, vres, vscale, wscale, stats)
+                periods += extra
+            out_rate[i] = prior[0]
+        out_status[i] = st
+        out_periods[i] = periods
+        if st == OK:
+            for j in range(dim):
+                out_v[i, j] = vres[j]
+                out_x[i, j] = xres[j]
+            out_stick[i] = frac
+            if S[S_WARM] > 0.0:
+                for j in range(dim):
+                    warm2[j] = warm[j]
+                    warm[j] = xres[j]
+                have_warm2 = have_warm and last_ok == i - 1
+                have_warm = True
+                last_ok = i
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def solve_motions(kind, MC, rows, Pall, X0, has_x0, R0, Ts, kmaxs, A, B, C, E, E3, S, out_v, out_x,
+                  out_status, out_periods, out_stick, out_rate):
+    """M motions x N configurations, in parallel over (motion, chunk of configurations).
+
+    MC (M, R, TABLE_COLS): motion tables, motion m using its first ``rows[m]`` rows; Pall (M, N, size):
+    parameter rows (written to: one copy per motion); X0, out_v, out_x (M, N, dim); has_x0, R0,
+    out_* (M, N); Ts, kmaxs (M,): periods and highest harmonics.
+    """
+    M = Pall.shape[0]
+    N = Pall.shape[1]
     chunk = max(1, int(S[S_CHUNK]))
     nch = (N + chunk - 1) // chunk
-    nscan = int(S[S_NSCAN]) * kmax
-    for ci in prange(nch):
-        K = np.zeros((B.shape[0] + 1, n))
-        ytmp = np.zeros(n)
-        ynew = np.zeros(n)
-        ybest = np.zeros(n)
-        W = np.zeros(W_SIZE)
-        sc = np.zeros(n)
-        tolv = np.zeros(dim)
-        x0 = np.zeros(dim)
-        vres = np.zeros(dim)
-        xres = np.zeros(dim)
-        stats = np.zeros(4)
-        warm = np.zeros(dim)
-        have_warm = False
-        h = T / (8.0 * kmax)
-        for i in range(ci * chunk, min(N, (ci + 1) * chunk)):
-            P = Pall[i]
-            for j in range(dim):
-                out_v[i, j] = np.nan
-                out_x[i, j] = np.nan
-            out_stick[i] = np.nan
-            out_periods[i] = 0
-            if kind == 0:
-                px = P[PP_X]
-                py = P[PP_Y]
-            else:
-                px = P[RP_X]
-                py = P[RP_Y]
-            if min_normal_accel(mc, px, py, T, 4 * nscan) <= 0.0:
-                out_status[i] = CONTACT_LOST
-                continue
-            if kind == 0:
-                vscale = point_velocity_scale(mc, px, py)
-                wscale = 0.0
-                can = True if S[S_SKIP_STICK] <= 0.0 else point_can_stick(mc, P, px, py, T, nscan, W)
-                P[PP_CANSTICK] = 1.0 if can else 0.0
-                P[PP_VSCALE] = vscale
-            else:
-                rigid_geometry(P, P[RP_TH], W)
-                vscale, wscale = rigid_scales(mc, P, px, py, W)
-                can = True if S[S_SKIP_STICK] <= 0.0 else rigid_can_stick(mc, P, px, py, T, nscan, W)
-                P[RP_CANSTICK] = 1.0 if can else 0.0
-                P[RP_VSCALE] = vscale
-                P[RP_WSCALE] = wscale
-            for j in range(dim):
-                sc[j] = 0.0
-                if kind == 1 and j == 2:
-                    sc[dim + j] = S[S_RTOL] * wscale + S[S_ATOL_W]
-                    tolv[j] = S[S_FP_RTOL] * wscale + S[S_FP_ATOL_W]
-                else:
-                    sc[dim + j] = S[S_RTOL] * vscale + S[S_ATOL_V]
-                    tolv[j] = S[S_FP_RTOL] * vscale + S[S_FP_ATOL_V]
-            zero_tol = zero_tolerance(S, vscale)
-            if kind == 1:
-                P[RP_ZTOL] = max(zero_tol, 100.0 * sc[3])
-            else:
-                P[PP_KAPPA] = 100.0 * sc[2]
-            # Starting guess: the caller's, else the neighbour's limit cycle, else rest.
-            for j in range(dim):
-                x0[j] = X0[i, j] if has_x0[i] else (warm[j] if have_warm else 0.0)
-            # Far outside the hull the one-period map only decelerates the part towards it; start
-            # at 4 velocity scales instead (the limit cycle is unique for point parts).
-            lim = 4.0 * vscale + 1e-12
-            sp = math.hypot(x0[0], x0[1])
-            if sp > lim:
-                x0[0] *= lim / sp
-                x0[1] *= lim / sp
-            if kind == 1 and abs(x0[2]) > 4.0 * wscale + 1e-12:
-                x0[2] = math.copysign(4.0 * wscale, x0[2])
-            st = OK
-            if kind == 0 and S[S_CLOSED_FORM] > 0.0:
-                lin, ex, ey = collinear_direction(mc, px, py)
-            else:
-                lin, ex, ey = False, 1.0, 0.0
-            if lin:
-                c1 = line_table(mc, px, py, ex, ey)
-                st, lam_avg, lam_start, periods = line_solve(
-                    c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
-                    S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats)
-                vres[0] = lam_avg * ex
-                vres[1] = lam_avg * ey
-                xres[0] = lam_start * ex
-                xres[1] = lam_start * ey
-                frac = stats[0] / T
-            else:
-                st, periods, frac, h = fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew,
-                                                   ybest, W, sc, n, dim, tolv, zero_tol,
-                                                   (1.0 if kind == 0 else 2.0) * vscale + 1e-12,
-                                                   2.0 * wscale + 1e-12, vres, xres, stats)
-                if st == OK and kind == 1 and S[S_STARTS] > 1.5:
-                    st, extra = _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc,
-                                              tolv, zero_tol, vres, vscale, wscale, stats)
-                    periods += extra
-            out_status[i] = st
-            out_periods[i] = periods
-            if st == OK:
-                for j in range(dim):
-                    out_v[i, j] = vres[j]
-                    out_x[i, j] = xres[j]
-                out_stick[i] = frac
-                if S[S_WARM] > 0.0:
-                    for j in range(dim):
-                        warm[j] = xres[j]
-                    have_warm = True
+    for job in prange(M * nch):
+        m = job // nch
+        ci = job - m * nch
+        solve_chunk(kind, MC[m, :rows[m]], Pall[m], X0[m], has_x0[m], R0[m], Ts[m], kmaxs[m], A, B, C, E, E3,
+                    S, out_v[m], out_x[m], out_status[m], out_periods[m], out_stick[m], out_rate[m],
+                    ci * chunk, min(N, (ci + 1) * chunk))
+
+
+@njit(cache=True, error_model="numpy")
+def solve_motions_serial(kind, MC, rows, Pall, X0, has_x0, R0, Ts, kmaxs, A, B, C, E, E3, S, out_v, out_x,
+                         out_status, out_periods, out_stick, out_rate):
+    """:func:`solve_motions` on the calling thread only (same chunks, same results): no thread
+    wake-ups, so no stall when the other core is busy."""
+    M = Pall.shape[0]
+    N = Pall.shape[1]
+    chunk = max(1, int(S[S_CHUNK]))
+    nch = (N + chunk - 1) // chunk
+    for job in range(M * nch):
+        m = job // nch
+        ci = job - m * nch
+        solve_chunk(kind, MC[m, :rows[m]], Pall[m], X0[m], has_x0[m], R0[m], Ts[m], kmaxs[m], A, B, C, E, E3,
+                    S, out_v[m], out_x[m], out_status[m], out_periods[m], out_stick[m], out_rate[m],
+                    ci * chunk, min(N, (ci + 1) * chunk))
 
 
 @njit(cache=True, error_model="numpy")
@@ -418,7 +537,7 @@ def _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, t
         x0[2] = wscale if s % 2 else -wscale
         st, periods, _, h = fixed_point(1, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, 6,
                                         3, tolv, zero_tol, 2.0 * vscale + 1e-12, 2.0 * wscale + 1e-12, v2, x2,
-                                        stats)
+                                        stats, np.ones(1))
         total += periods
         if st != OK:
             return st, total

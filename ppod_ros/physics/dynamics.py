@@ -22,18 +22,19 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numba
 import numpy as np
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import _layout as lay
-from ppod_ros.physics._dynamics_kernel import AUX_READY, advance_group
+from ppod_ros.physics import _threads
+from ppod_ros.physics._dynamics_kernel import AUX_READY, advance_group, advance_group_serial
 from ppod_ros.physics._params import check_part, ensure_compiled, point_rows, rigid_rows
 from ppod_ros.physics._rk import INTEGRATORS
 from ppod_ros.physics.plate import motion_table, table_kmax
@@ -133,8 +134,9 @@ class PartDynamics:
         self._time = _finite(time_s, "time_s")
         self.parts = parts
         self._lock = threading.Lock()
-        self.setup_seconds = ensure_compiled()
         kinds = np.array([0 if isinstance(p, PointPart) else 1 for p in parts], int)
+        # The serial kernels of the kinds present (the parallel ones load when first needed).
+        self.setup_seconds = ensure_compiled(*sorted({("dyn", int(k), False) for k in kinds})) if kinds.size else 0.0
         self._groups = []
         for kind in (0, 1):
             idx = np.flatnonzero(kinds == kind)
@@ -222,20 +224,23 @@ class PartDynamics:
             mc = motion_table(motion, prune=self.settings.prune_harmonics)
             kmax = table_kmax(mc, motion.omega)
             tab = INTEGRATORS[self.settings.integrator]
-            old = numba.get_num_threads()
-            if self.settings.threads is not None:
-                numba.set_num_threads(min(self.settings.threads, numba.config.NUMBA_NUM_THREADS))
-            try:
-                for g in self._groups:
-                    S = self.settings.vector("point" if g.kind == 0 else "rigid")
-                    g.AUX[:, AUX_READY] = 0.0  # re-derive modes: the motion may have changed
-                    g.stick[:] = 0.0
-                    if duration > 0:
-                        advance_group(g.kind, mc, g.P, g.Y, g.AUX, g.H, t0, t1, T, kmax, tab.A, tab.B, tab.C,
-                                      tab.E, tab.E3, S, g.status, g.stick, g.steps)
-                    self._last_fraction[g.index] = g.stick / duration if duration > 0 else 0.0
-            finally:
-                numba.set_num_threads(old)
+            for g in self._groups:
+                S = self.settings.vector("point" if g.kind == 0 else "rigid")
+                g.AUX[:, AUX_READY] = 0.0  # re-derive modes: the motion may have changed
+                g.stick[:] = 0.0
+                if duration > 0:
+                    # Serial unless the work is large enough to pay a parallel call's wake-up.
+                    cost_kind = f"dyn{g.kind}"
+                    units = int(np.count_nonzero(g.status == lay.OK)) * max(1.0, duration / T)
+                    nthreads = _threads.plan(cost_kind, units, self.settings.threads)
+                    kernel = advance_group if nthreads > 1 else advance_group_serial
+                    self.setup_seconds += ensure_compiled(("dyn", g.kind, nthreads > 1))
+                    tk = time.perf_counter()
+                    with _threads.thread_count(nthreads):
+                        kernel(g.kind, mc, g.P, g.Y, g.AUX, g.H, t0, t1, T, kmax, tab.A, tab.B, tab.C, tab.E,
+                               tab.E3, S, g.status, g.stick, g.steps)
+                    _threads.learn(cost_kind, units, time.perf_counter() - tk, nthreads)
+                self._last_fraction[g.index] = g.stick / duration if duration > 0 else 0.0
             self._time = t_start + duration
         return self.state
 

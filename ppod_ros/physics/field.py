@@ -17,21 +17,21 @@ import math
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numba
 import numpy as np
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import _layout as lay
+from ppod_ros.physics import _threads
 from ppod_ros.physics._params import check_configs, check_part, ensure_compiled, point_rows, rigid_rows
 from ppod_ros.physics._rk import INTEGRATORS
-from ppod_ros.physics._solve import solve_batch
-from ppod_ros.physics.plate import motion_table, table_kmax
+from ppod_ros.physics._solve import solve_motions, solve_motions_serial
+from ppod_ros.physics.plate import TABLE_COLS, motion_table, table_kmax
 from ppod_ros.physics.settings import REASONS, SolverSettings
 
 
@@ -168,10 +168,118 @@ class FieldCache:
 FIELD_CACHE = FieldCache()
 
 
+class WarmStarts:
+    """Limit-cycle starts and contraction rates of configurations solved before, keyed by (part,
+    settings, configuration) but not by motion: designs, Jacobians and replanning evaluate the
+    same configurations under slightly different motions many times, and the previous cycle start
+    with its contraction rate lets a configuration converge in about one period. Bounded in
+    entries (whole (part, settings) groups are dropped least recently used first)."""
+
+    def __init__(self, max_entries: int = 200_000):
+        self.max_entries = int(max_entries)
+        self._groups: OrderedDict[tuple, dict[bytes, tuple[np.ndarray, float]]] = OrderedDict()
+        self._count = 0
+        self._lock = threading.Lock()
+
+    def clear(self) -> None:
+        with self._lock:
+            self._groups.clear()
+            self._count = 0
+
+    def __len__(self) -> int:
+        return self._count
+
+    def lookup(self, prefix: tuple, configs: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(starts (N, dim), rates (N,), found (N,) bool)."""
+        n = configs.shape[0]
+        x0 = np.zeros((n, dim))
+        r0 = np.ones(n)
+        has = np.zeros(n, np.bool_)
+        with self._lock:
+            group = self._groups.get(prefix)
+            if group is None:
+                return x0, r0, has
+            self._groups.move_to_end(prefix)
+            for i, row in enumerate(configs):
+                entry = group.get(row.tobytes())
+                if entry is not None:
+                    x0[i], r0[i] = entry
+                    has[i] = True
+        return x0, r0, has
+
+    def store(self, prefix: tuple, configs: np.ndarray, starts: np.ndarray, rates: np.ndarray,
+              ok: np.ndarray) -> None:
+        with self._lock:
+            group = self._groups.setdefault(prefix, {})
+            self._groups.move_to_end(prefix)
+            before = len(group)
+            for row, x, r, good in zip(configs, starts, rates, ok):
+                if good:
+                    group[row.tobytes()] = (x.copy(), float(r))
+            self._count += len(group) - before
+            while self._count > self.max_entries and len(self._groups) > 1:
+                _, old = self._groups.popitem(last=False)
+                self._count -= len(old)
+
+
+#: The process-wide warm starts used by :func:`solve_fields` (and by :func:`solve_field` on request).
+WARM_STARTS = WarmStarts()
+
+
+@dataclass(frozen=True, eq=False)
+class FieldsResult:
+    """Fields of M motions at N configurations each (:func:`solve_fields`; arrays read-only).
+
+    Attributes are those of :class:`FieldResult` with a leading motion axis: ``configs``,
+    ``velocity`` and ``cycle_start`` (M, N, dim); ``valid``, ``reason_code``, ``periods`` and
+    ``stick_fraction`` (M, N); ``reason`` (M, N) object array; ``motion_names`` (M,). ``field(m)``
+    gives motion m's :class:`FieldResult`.
+    """
+
+    configs: np.ndarray
+    velocity: np.ndarray
+    valid: np.ndarray
+    reason_code: np.ndarray
+    periods: np.ndarray
+    stick_fraction: np.ndarray
+    cycle_start: np.ndarray
+    seconds: float
+    setup_seconds: float
+    part_kind: str
+    settings: SolverSettings
+    motion_names: tuple[str, ...] = ()
+    cache_hits: int = 0
+    threads: int = 1
+
+    def __post_init__(self) -> None:
+        for name in ("configs", "velocity", "valid", "reason_code", "periods", "stick_fraction",
+                     "cycle_start"):
+            getattr(self, name).setflags(write=False)
+
+    @property
+    def reason(self) -> np.ndarray:
+        """Reason text per motion and configuration (None where valid), object array (M, N)."""
+        out = np.empty(self.reason_code.shape, dtype=object)
+        for idx, c in np.ndenumerate(self.reason_code):
+            out[idx] = REASONS[int(c)]
+        return out
+
+    def __len__(self) -> int:
+        return int(self.velocity.shape[0])
+
+    def field(self, m: int) -> FieldResult:
+        """Motion ``m``'s field as a :class:`FieldResult` (``seconds``: this call's share)."""
+        share = self.seconds / max(1, len(self))
+        return FieldResult(self.configs[m].copy(), self.velocity[m].copy(), self.valid[m].copy(),
+                           self.reason_code[m].copy(), self.periods[m].copy(), self.stick_fraction[m].copy(),
+                           self.cycle_start[m].copy(), share, self.setup_seconds if m == 0 else 0.0,
+                           self.part_kind, self.settings, self.motion_names[m] if self.motion_names else "")
+
+
 def solve_field(motion: PlateMotion, part: PointPart | RigidPart, configs: Any,
                 settings: SolverSettings | None = None, *, initial: Any = None,
                 progress: Callable[[int, int], None] | None = None,
-                cache: FieldCache | None = None) -> FieldResult:
+                cache: FieldCache | None = None, warm: WarmStarts | bool | None = None) -> FieldResult:
     """Asymptotic velocity (point part) or twist (rigid part) at each configuration.
 
     Parameters
@@ -188,6 +296,10 @@ def solve_field(motion: PlateMotion, part: PointPart | RigidPart, configs: Any,
         Called as chunks of configurations finish (the work is then split into ~20 calls).
     cache : FieldCache, optional
         Cache to use instead of the process-wide :data:`FIELD_CACHE`.
+    warm : WarmStarts or bool, optional
+        Start from (and remember) the limit cycles of previous calls at the same configurations:
+        ``True`` uses the process-wide :data:`WARM_STARTS`. Default: off (results do not depend on
+        earlier calls).
 
     Returns
     -------
@@ -195,81 +307,210 @@ def solve_field(motion: PlateMotion, part: PointPart | RigidPart, configs: Any,
     """
     if not isinstance(motion, PlateMotion):
         raise ConfigError(f"motion: expected a PlateMotion, got {type(motion).__name__}")
+    r = solve_fields([motion], part, configs, settings, initial=initial, progress=progress, cache=cache,
+                     warm=False if warm is None else warm)
+    return FieldResult(
+        r.configs[0].copy(), r.velocity[0].copy(), r.valid[0].copy(), r.reason_code[0].copy(),
+        r.periods[0].copy(), r.stick_fraction[0].copy(), r.cycle_start[0].copy(), r.seconds, r.setup_seconds,
+        part.kind, r.settings, motion.name, r.cache_hits)
+
+
+def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, configs: Any,
+                 settings: SolverSettings | None = None, *, initial: Any = None,
+                 progress: Callable[[int, int], None] | None = None, cache: FieldCache | None = None,
+                 warm: WarmStarts | bool = True) -> FieldsResult:
+    """Fields of many motions at many configurations in one compiled call.
+
+    Parameters
+    ----------
+    motions : sequence of PlateMotion (M of them; any periods and harmonics)
+    part : PointPart or RigidPart
+    configs : array_like, shape (N, dim) shared by all motions, or (M, N, dim) one set per motion
+        [x, y] in m (point, dim 2) or [x, y, theta] in m, m, rad (rigid, dim 3).
+    settings : SolverSettings, optional
+    initial : array_like, shape (N, dim) or (M, N, dim), optional
+        Velocity / twist at t = 0 to start from (overrides the warm starts).
+    progress : callable(done, total), optional
+        Called as slices of configurations finish (``total`` = M * N).
+    cache : FieldCache, optional
+        Cache to use instead of :data:`FIELD_CACHE` (when ``settings.cache``).
+    warm : WarmStarts or bool
+        Warm starts from previous calls at the same configurations (default: the process-wide
+        :data:`WARM_STARTS`; ``False``: none). Each configuration of this call also starts from its
+        neighbour's limit cycle (``settings.warm_start``).
+
+    Small calls run serially on the calling thread (no thread wake-up stall on a busy machine),
+    large ones in parallel (``settings.threads``; see docs/solver.md). Results do not depend on
+    that choice.
+
+    Returns
+    -------
+    FieldsResult
+    """
+    motions = list(motions) if not isinstance(motions, PlateMotion) else [motions]
+    if not motions:
+        raise ConfigError("motions: expected at least one PlateMotion, got none")
+    for i, m in enumerate(motions):
+        if not isinstance(m, PlateMotion):
+            raise ConfigError(f"motions[{i}]: expected a PlateMotion, got {type(m).__name__}")
     check_part(part)
     if settings is None:
         settings = SolverSettings()
     elif not isinstance(settings, SolverSettings):
         raise ConfigError(f"settings: expected SolverSettings, got {type(settings).__name__}")
-    cfg = check_configs(configs, part)
-    dim = cfg.shape[1]
-    x0 = None
-    if initial is not None:
-        x0 = check_configs(initial, part, "initial")
-        if x0.shape != cfg.shape:
-            raise ConfigError(f"initial: expected shape {cfg.shape} like configs, got {x0.shape}")
-    setup = ensure_compiled()
-    t_start = time.perf_counter()
-    N = cfg.shape[0]
-    velocity = np.full((N, dim), np.nan)
-    start = np.full((N, dim), np.nan)
-    code = np.zeros(N, np.int64)
-    periods = np.zeros(N, np.int64)
-    stick = np.full(N, np.nan)
-    store = cache if cache is not None else FIELD_CACHE
-    prefix = (motion.key, part.key, settings.cache_key())
-    if settings.cache:
-        miss, found = store.lookup(prefix, cfg)
-        for i, entry in enumerate(found):
-            if entry is not None:
-                velocity[i], start[i], code[i], stick[i] = entry
+    M = len(motions)
+    cfg = _configs_per_motion(configs, part, M, "configs")
+    x_init = None if initial is None else _configs_per_motion(initial, part, M, "initial")
+    if x_init is not None and x_init.shape != cfg.shape:
+        raise ConfigError(f"initial: expected shape {cfg.shape[1:]} or {cfg.shape} like configs, "
+                          f"got {np.shape(initial)}")
+    if warm is True:
+        store_w: WarmStarts | None = WARM_STARTS
+    elif warm is False or warm is None:
+        store_w = None
+    elif isinstance(warm, WarmStarts):
+        store_w = warm
     else:
-        miss = np.ones(N, bool)
-    idx = np.flatnonzero(miss)
-    if idx.size:
-        _run(motion, part, cfg[idx], None if x0 is None else x0[idx], settings, progress,
-             velocity, start, code, periods, stick, idx)
-        if settings.cache:
-            entries = [(velocity[i].copy(), start[i].copy(), int(code[i]), float(stick[i])) for i in idx]
-            store.store(prefix, cfg[idx], entries)
-    seconds = time.perf_counter() - t_start
-    return FieldResult(cfg, velocity, code == lay.OK, code, periods, stick, start, seconds, setup, part.kind,
-                       settings, motion.name, int(N - idx.size))
+        raise ConfigError(f"warm: expected a WarmStarts or a bool, got {type(warm).__name__}")
+    setup = 0.0
+    t_start = time.perf_counter()
+    N, dim = cfg.shape[1], cfg.shape[2]
+    velocity = np.full((M, N, dim), np.nan)
+    start = np.full((M, N, dim), np.nan)
+    code = np.zeros((M, N), np.int64)
+    periods = np.zeros((M, N), np.int64)
+    stick = np.full((M, N), np.nan)
+    rates = np.ones((M, N))
+    miss = np.ones((M, N), bool)
+    store = cache if cache is not None else FIELD_CACHE
+    skey = settings.cache_key()
+    if settings.cache:
+        for m, motion in enumerate(motions):
+            miss[m], found = store.lookup((motion.key, part.key, skey), cfg[m])
+            for i, entry in enumerate(found):
+                if entry is not None:
+                    velocity[m, i], start[m, i], code[m, i], stick[m, i] = entry
+    X0 = np.zeros((M, N, dim))
+    R0 = np.ones((M, N))
+    has = np.zeros((M, N), np.bool_)
+    wkey = (part.key, skey)
+    if store_w is not None:
+        for m in range(M):
+            X0[m], R0[m], has[m] = store_w.lookup(wkey, cfg[m], dim)
+    if x_init is not None:
+        X0[:] = x_init
+        R0[:] = 1.0
+        has[:] = True
+    todo = int(miss.sum())
+    nthreads = 1
+    if todo:
+        if miss.all():
+            sub = cfg
+            sel = None
+        else:  # only the misses: per motion, padded to the longest with repeats of a miss
+            sel = _miss_rows(miss)
+            sub = np.take_along_axis(cfg, sel[:, :, None], axis=1)
+            X0 = np.take_along_axis(X0, sel[:, :, None], axis=1)
+            R0 = np.take_along_axis(R0, sel, axis=1)
+            has = np.take_along_axis(has, sel, axis=1)
+        nthreads, setup, out = _run(motions, part, sub, X0, R0, has, settings, progress)
+        ov, ox, os_, op, of, orate = out
+        if sel is None:
+            velocity, start, code, periods, stick, rates = ov, ox, os_, op, of, orate
+        else:
+            for m in range(M):
+                rows = np.flatnonzero(miss[m])
+                k = rows.size
+                velocity[m, rows], start[m, rows], code[m, rows] = ov[m, :k], ox[m, :k], os_[m, :k]
+                periods[m, rows], stick[m, rows], rates[m, rows] = op[m, :k], of[m, :k], orate[m, :k]
+        for m, motion in enumerate(motions):
+            rows = np.flatnonzero(miss[m])
+            if settings.cache and rows.size:
+                entries = [(velocity[m, i].copy(), start[m, i].copy(), int(code[m, i]), float(stick[m, i]))
+                           for i in rows]
+                store.store((motion.key, part.key, skey), cfg[m, rows], entries)
+            if store_w is not None and rows.size:
+                store_w.store(wkey, cfg[m, rows], start[m, rows], rates[m, rows], code[m, rows] == lay.OK)
+    seconds = time.perf_counter() - t_start - setup
+    return FieldsResult(cfg, velocity, code == lay.OK, code, periods, stick, start, seconds, setup, part.kind,
+                        settings, tuple(m.name for m in motions), int(M * N - todo), nthreads)
 
 
-def _run(motion, part, cfg, x0, settings, progress, velocity, start, code, periods, stick, idx) -> None:
-    mc = motion_table(motion, prune=settings.prune_harmonics)
-    kmax = table_kmax(mc, motion.omega)
+def _configs_per_motion(value: Any, part: PointPart | RigidPart, M: int, name: str) -> np.ndarray:
+    """(M, N, dim) float64 from (N, dim) shared or (M, N, dim) per motion."""
+    dim = 2 if isinstance(part, PointPart) else 3
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{name}: expected numbers, rows of {dim} values: {exc}") from exc
+    if arr.ndim == 3:
+        if arr.shape[0] != M:
+            raise ConfigError(f"{name}: expected shape (N, {dim}) or ({M}, N, {dim}) for {M} motions, "
+                              f"got {arr.shape}")
+        rows = [check_configs(a, part, name) for a in arr]
+        return np.ascontiguousarray(np.stack(rows))
+    one = check_configs(arr, part, name)
+    return np.ascontiguousarray(np.broadcast_to(one, (M,) + one.shape))
+
+
+def _miss_rows(miss: np.ndarray) -> np.ndarray:
+    """(M, K) row indices of each motion's misses, padded with its last miss (or row 0)."""
+    K = int(miss.sum(axis=1).max())
+    sel = np.zeros((miss.shape[0], K), np.int64)
+    for m in range(miss.shape[0]):
+        rows = np.flatnonzero(miss[m])
+        if rows.size:
+            sel[m, :rows.size] = rows
+            sel[m, rows.size:] = rows[-1]
+    return sel
+
+
+def _run(motions, part, cfg, X0, R0, has, settings, progress):
+    """Solve cfg (M, N, dim) for every motion; returns (threads used, set-up seconds, outputs)."""
+    M, n, dim = cfg.shape
+    tables = [motion_table(m, prune=settings.prune_harmonics) for m in motions]
+    rows = np.array([t.shape[0] for t in tables], np.int64)
+    MC = np.zeros((M, max(1, int(rows.max())), TABLE_COLS))
+    for m, t in enumerate(tables):
+        MC[m, :t.shape[0]] = t
+    kmaxs = np.array([table_kmax(t, mo.omega) for t, mo in zip(tables, motions)], np.int64)
+    Ts = np.array([mo.period_s for mo in motions], float)
     tab = INTEGRATORS[settings.integrator]
     kind = 0 if isinstance(part, PointPart) else 1
     S = settings.vector(part.kind)
-    P = point_rows(part, cfg) if kind == 0 else rigid_rows(part, cfg, settings.friction_eps_mps)
-    n, dim = cfg.shape
-    X0 = np.zeros((n, dim)) if x0 is None else x0
-    has = np.zeros(n, np.bool_) if x0 is None else np.ones(n, np.bool_)
-    out_v = np.full((n, dim), np.nan)
-    out_x = np.full((n, dim), np.nan)
-    out_s = np.zeros(n, np.int64)
-    out_p = np.zeros(n, np.int64)
-    out_f = np.full(n, np.nan)
-    old_threads = numba.get_num_threads()
-    if settings.threads is not None:
-        numba.set_num_threads(min(settings.threads, numba.config.NUMBA_NUM_THREADS))
-    try:
-        # Progress: split into ~20 slices aligned to the parallel chunks (same results as one call).
-        step = n if progress is None else max(settings.chunk, -(-n // 20 // settings.chunk) * settings.chunk)
-        for a in range(0, n, step):
-            b = min(n, a + step)
-            solve_batch(kind, mc, P[a:b], X0[a:b], has[a:b], motion.period_s, kmax, tab.A, tab.B, tab.C,
-                        tab.E, tab.E3, S, out_v[a:b], out_x[a:b], out_s[a:b], out_p[a:b], out_f[a:b])
-            if progress is not None:
-                progress(b, n)
-    finally:
-        numba.set_num_threads(old_threads)
-    velocity[idx] = out_v
-    start[idx] = out_x
-    code[idx] = out_s
-    periods[idx] = out_p
-    stick[idx] = out_f
+    flat = cfg.reshape(M * n, dim)
+    P = point_rows(part, flat) if kind == 0 else rigid_rows(part, flat, settings.friction_eps_mps)
+    P = np.ascontiguousarray(P.reshape(M, n, P.shape[1]))
+    out_v = np.full((M, n, dim), np.nan)
+    out_x = np.full((M, n, dim), np.nan)
+    out_s = np.zeros((M, n), np.int64)
+    out_p = np.zeros((M, n), np.int64)
+    out_f = np.full((M, n), np.nan)
+    out_r = np.ones((M, n))
+    cost_kind = f"field{kind}"
+    nthreads = _threads.plan(cost_kind, M * n, settings.threads)
+    kernel = solve_motions if nthreads > 1 else solve_motions_serial
+    setup = ensure_compiled(("field", kind, nthreads > 1))
+    t0 = time.perf_counter()
+    with _threads.thread_count(nthreads):
+        # Progress: split into ~20 slices aligned to the chunks (same results as one call).
+        if progress is None:
+            kernel(kind, MC, rows, P, X0, has, R0, Ts, kmaxs, tab.A, tab.B, tab.C, tab.E, tab.E3, S, out_v,
+                   out_x, out_s, out_p, out_f, out_r)
+        else:
+            # ~20 slices aligned to the chunks (same results as one call), each contiguous.
+            step = max(settings.chunk, -(-n // 20 // settings.chunk) * settings.chunk)
+            for a in range(0, n, step):
+                b = min(n, a + step)
+                outs = [np.ascontiguousarray(o[:, a:b]) for o in (out_v, out_x, out_s, out_p, out_f, out_r)]
+                c = np.ascontiguousarray
+                kernel(kind, MC, rows, c(P[:, a:b]), c(X0[:, a:b]), c(has[:, a:b]), c(R0[:, a:b]), Ts, kmaxs,
+                       tab.A, tab.B, tab.C, tab.E, tab.E3, S, *outs)
+                for o, part_out in zip((out_v, out_x, out_s, out_p, out_f, out_r), outs):
+                    o[:, a:b] = part_out
+                progress(M * b, M * n)
+    _threads.learn(cost_kind, M * n, time.perf_counter() - t0, nthreads)
+    return nthreads, setup, (out_v, out_x, out_s, out_p, out_f, out_r)
 
 
 def grid_configs(x: np.ndarray, y: np.ndarray, theta: np.ndarray | None = None) -> np.ndarray:
@@ -283,4 +524,5 @@ def grid_configs(x: np.ndarray, y: np.ndarray, theta: np.ndarray | None = None) 
     return np.stack([X.ravel(), Y.ravel(), T.ravel()], axis=1)
 
 
-__all__ = ["FIELD_CACHE", "FieldCache", "FieldResult", "grid_configs", "solve_field"]
+__all__ = ["FIELD_CACHE", "WARM_STARTS", "FieldCache", "FieldResult", "FieldsResult", "WarmStarts", "grid_configs",
+           "solve_field", "solve_fields"]

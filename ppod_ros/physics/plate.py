@@ -8,8 +8,10 @@ present (zero-amplitude harmonics are pruned, so they cost nothing in the time s
     v_j(t) = vs_j sin x + vc_j cos x                  (zero-mean velocity)
     d_j(t) = ds_j sin x + dc_j cos x                  (zero-mean displacement)
 
-summed over the rows. Columns: ``[k Omega, as(6), ac(6), vs(6), vc(6), ds(6), dc(6)]``.
-One ``sin``/``cos`` pair per present harmonic and time gives all 18 series.
+summed over the rows. Columns: ``[k Omega, as(6), ac(6), vs(6), vc(6), ds(6), dc(6), k, Omega]``.
+One ``sin``/``cos`` pair per time gives all 18 series: the pair of the fundamental, then the
+angle-addition recurrence up to each present harmonic (rows ascend in k), instead of one pair per
+harmonic.
 """
 
 from __future__ import annotations
@@ -23,12 +25,13 @@ from ppod_ros.motion import GRAVITY_MPS2, PlateMotion
 
 #: Column offsets in the coefficient table.
 COL_W, COL_AS, COL_AC, COL_VS, COL_VC, COL_DS, COL_DC = 0, 1, 7, 13, 19, 25, 31
-TABLE_COLS = 37
+COL_K, COL_OMEGA = 37, 38  # harmonic number, fundamental (rad/s): the sin/cos recurrence
+TABLE_COLS = 39
 G = GRAVITY_MPS2
 
 
 def motion_table(motion: PlateMotion, prune: bool = True) -> np.ndarray:
-    """The coefficient table of ``motion``, shape (K, 37).
+    """The coefficient table of ``motion``, shape (K, 39).
 
     Parameters
     ----------
@@ -50,7 +53,7 @@ def motion_table(motion: PlateMotion, prune: bool = True) -> np.ndarray:
         # d = -A/w^2 sin(x + phi)
         d_s = -a_s / w**2
         d_c = -a_c / w**2
-        rows.append(np.concatenate([[w], a_s, a_c, v_s, v_c, d_s, d_c]))
+        rows.append(np.concatenate([[w], a_s, a_c, v_s, v_c, d_s, d_c, [float(k), motion.omega]]))
     if not rows:
         return np.zeros((0, TABLE_COLS))
     return np.ascontiguousarray(np.array(rows, dtype=np.float64))
@@ -72,10 +75,29 @@ def plate_eval(mc, t, W, ou, ov):
     for j in range(6):
         W[ou + j] = 0.0
         W[ov + j] = 0.0
-    for r in range(mc.shape[0]):
-        x = mc[r, 0] * t
-        s = math.sin(x)
-        c = math.cos(x)
+    nr = mc.shape[0]
+    s1 = 0.0
+    c1 = 1.0
+    sk = 0.0
+    ck = 1.0
+    k = 0
+    if nr > 1:
+        x1 = mc[0, COL_OMEGA] * t
+        s1 = math.sin(x1)
+        c1 = math.cos(x1)
+    for r in range(nr):
+        if nr == 1:
+            x = mc[r, 0] * t
+            s = math.sin(x)
+            c = math.cos(x)
+        else:
+            # sin/cos of k Omega t by angle addition from the fundamental (rows ascend in k).
+            target = int(mc[r, COL_K])
+            while k < target:
+                sk, ck = sk * c1 + ck * s1, ck * c1 - sk * s1
+                k += 1
+            s = sk
+            c = ck
         for j in range(6):
             W[ou + j] += mc[r, 1 + j] * s + mc[r, 7 + j] * c
             W[ov + j] += mc[r, 13 + j] * s + mc[r, 19 + j] * c
@@ -149,6 +171,7 @@ def _normal_at(mc, x, y, t):
 
 
 __all__ = [
-    "COL_AC", "COL_AS", "COL_DC", "COL_DS", "COL_VC", "COL_VS", "COL_W", "G", "TABLE_COLS",
+    "COL_AC", "COL_AS", "COL_DC", "COL_DS", "COL_K", "COL_OMEGA", "COL_VC", "COL_VS", "COL_W", "G",
+    "TABLE_COLS",
     "min_normal_accel", "motion_table", "plate_eval", "point_velocity_scale", "table_kmax",
 ]

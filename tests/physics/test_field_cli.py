@@ -58,3 +58,24 @@ def test_bad_motion_files_are_one_line_errors_naming_the_field(tmp_path, capsys)
     unknown.write_text(LINESINKX + "colour: red\n")
     assert main(["field", str(unknown)]) == 2
     assert "colour" in capsys.readouterr().err
+
+
+def test_several_motion_files_give_one_field_json_each_and_one_line_each_on_stdout(tmp_path, motion, capsys):
+    sink = tmp_path / "Sink.yaml"
+    sink.write_text("name: Sink\nfrequency_hz: 30\nharmonics:\n"
+                    "  - {k: 1, amplitude: [10, 10, 0, 100, 100, 0], "
+                    "phase: [0, 1.57079633, 0, 3.14159265, 4.71238898, 0]}\n")
+    grid = ["--x", "-0.05", "0.05", "3", "--y", "0", "0.02", "2"]
+    assert main(["field", str(motion), str(sink), *grid, "--json", str(tmp_path / "out"), "--quiet"]) == 0
+    files = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert files == ["LineSinkX.json", "Sink.json"]
+    one = tmp_path / "single.json"
+    assert main(["field", str(sink), *grid, "--json", str(one), "--quiet"]) == 0
+    single = json.loads(one.read_text())
+    batch = json.loads((tmp_path / "out" / "Sink.json").read_text())
+    assert batch["configs"] == single["configs"] and batch["motion"] == "Sink"
+    assert np.allclose(np.array(batch["velocity"], float), np.array(single["velocity"], float), atol=1e-12)
+    capsys.readouterr()
+    assert main(["field", str(motion), str(sink), *grid, "--json", "-", "--quiet"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert [json.loads(line)["motion"] for line in lines] == ["LineSinkX", "Sink"]

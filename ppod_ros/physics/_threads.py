@@ -1,0 +1,73 @@
+"""Serial or parallel, chosen per call by the work's expected size.
+
+On a 2-core machine whose other core is busy (the ROS stack's normal state) a numba parallel call
+waits for its second thread to be scheduled: about one scheduler time slice (~8 ms, p90 12 ms) per
+call, whatever the work. Small calls therefore run a serial variant of the kernel on the calling
+thread (same chunks, same results); only work expected to take longer than
+``PARALLEL_MIN_SECONDS`` serially goes parallel, where the stall is small beside the gain.
+
+The expected time is the number of work units times a per-unit cost learnt from this process's
+previous calls (an exponential average per kind of work, seeded with ``SEED_COST_S``). Nothing here
+changes numba's global state: the thread count of a parallel call is set with
+``numba.set_num_threads`` (thread-local in numba) and restored after the call.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import numba
+
+#: Expected serial time (s) above which a call runs in parallel.
+PARALLEL_MIN_SECONDS = 0.03
+#: Starting per-unit costs (s) before anything was measured: a point / rigid configuration of the
+#: field solver, a point / rigid part per period of full dynamics.
+SEED_COST_S = {"field0": 2e-4, "field1": 3e-3, "dyn0": 2e-5, "dyn1": 2e-4}
+#: Weight of the newest measurement in the per-unit cost's exponential average.
+COST_SMOOTHING = 0.3
+
+_lock = threading.Lock()
+_cost = dict(SEED_COST_S)
+
+
+def plan(kind: str, units: float, threads: int | None) -> int:
+    """Threads to use for ``units`` of work of ``kind`` (1: run the serial kernel).
+
+    ``threads`` is the caller's setting (None: choose by size; 1: always serial; n > 1: parallel on
+    up to n threads when the work is large enough to pay for the wake-up).
+    """
+    avail = int(numba.config.NUMBA_NUM_THREADS)
+    want = avail if threads is None else min(int(threads), avail)
+    if want <= 1:
+        return 1
+    with _lock:
+        expected = units * _cost[kind]
+    return want if expected >= PARALLEL_MIN_SECONDS else 1
+
+
+def learn(kind: str, units: float, seconds: float, nthreads: int) -> None:
+    """Update the per-unit cost of ``kind`` from a call that took ``seconds`` on ``nthreads``."""
+    if units <= 0 or seconds <= 0:
+        return
+    per_unit = seconds * max(1, nthreads) / units  # parallel calls: an upper bound on the serial cost
+    with _lock:
+        _cost[kind] = (1.0 - COST_SMOOTHING) * _cost[kind] + COST_SMOOTHING * per_unit
+
+
+@contextmanager
+def thread_count(nthreads: int) -> Iterator[None]:
+    """numba's thread count for parallel kernels called inside (this thread only), restored after."""
+    if nthreads <= 1:
+        yield
+        return
+    old = numba.get_num_threads()
+    numba.set_num_threads(nthreads)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(old)
+
+
+__all__ = ["PARALLEL_MIN_SECONDS", "SEED_COST_S", "learn", "plan", "thread_count"]

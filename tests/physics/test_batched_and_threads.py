@@ -1,0 +1,122 @@
+"""solve_fields (many motions x configurations in one call), the serial/parallel choice, warm
+starts from previous calls, and one StickingHeavy preset."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ppod_ros.errors import ConfigError
+from ppod_ros.motion import PlateMotion
+from ppod_ros.physics import (
+    PartDynamics,
+    SolverSettings,
+    WarmStarts,
+    _threads,
+    grid_configs,
+    solve_field,
+    solve_fields,
+)
+from tests.physics.physics_suite import CONFIG, suite_motion
+
+NOCACHE = SolverSettings(cache=False)
+
+
+@pytest.fixture
+def forced(monkeypatch):
+    """Force the parallel kernels (threshold 0) or the serial ones (threshold infinite)."""
+    def force(parallel: bool):
+        monkeypatch.setattr(_threads, "PARALLEL_MIN_SECONDS", 0.0 if parallel else float("inf"))
+    return force
+
+
+def test_serial_and_parallel_kernels_give_identical_fields(point_part, forced):
+    m = suite_motion("Sink")
+    cfg = grid_configs(np.linspace(-0.08, 0.08, 9), np.linspace(-0.08, 0.08, 9))
+    forced(False)
+    a = solve_field(m, point_part, cfg, NOCACHE)
+    forced(True)
+    b = solve_field(m, point_part, cfg, NOCACHE.replace(threads=2))
+    assert np.array_equal(a.velocity, b.velocity, equal_nan=True)
+    assert np.array_equal(a.periods, b.periods)
+
+
+def test_serial_and_parallel_dynamics_give_identical_trajectories(point_part, rigid_part, forced):
+    m = suite_motion("Sink")
+    cfg = [[0.05, 0.0, 0.0], [-0.03, 0.02, 0.0], [0.0, 0.04, 0.5]]
+    out = []
+    for parallel in (False, True):
+        forced(parallel)
+        sim = PartDynamics([point_part, point_part, rigid_part], cfg)
+        for k in range(3):
+            sim.advance(m, k * 0.05, 0.05)
+        out.append(sim.state.configurations)
+    assert np.array_equal(out[0], out[1])
+
+
+def test_small_calls_plan_serial_and_large_ones_parallel_by_learnt_cost(monkeypatch):
+    monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
+    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    assert _threads.plan("field0", 37, None) == 1
+    assert _threads.plan("field0", 100_000, None) == 2
+    assert _threads.plan("field0", 100_000, 1) == 1  # threads=1: always serial
+    _threads.learn("dyn0", 10, 10.0, 1)  # a very slow call raises the learnt cost
+    assert _threads.plan("dyn0", 10, None) == 2
+
+
+def test_solve_fields_matches_solve_field_per_motion_with_shared_and_per_motion_configs(point_part):
+    motions = [suite_motion("LineSinkX"), suite_motion("Sink"), suite_motion("Swirl3H")]
+    cfg = grid_configs(np.linspace(-0.06, 0.06, 4), np.linspace(-0.06, 0.06, 3))
+    r = solve_fields(motions, point_part, cfg, NOCACHE, warm=False)
+    assert r.velocity.shape == (3, 12, 2) and r.valid.shape == (3, 12) and r.periods.shape == (3, 12)
+    assert r.reason.shape == (3, 12) and len(r) == 3 and r.motion_names == ("LineSinkX", "Sink", "Swirl3H")
+    for m, motion in enumerate(motions):
+        one = solve_field(motion, point_part, cfg, NOCACHE)
+        assert np.array_equal(one.velocity, r.velocity[m], equal_nan=True)
+        assert np.array_equal(one.valid, r.valid[m])
+        assert r.field(m).motion_name == motion.name
+    per = np.stack([cfg, cfg[::-1], cfg + 0.001])
+    rp = solve_fields(motions, point_part, per, NOCACHE, warm=False)
+    assert np.allclose(rp.velocity[1], solve_field(motions[1], point_part, cfg[::-1], NOCACHE).velocity,
+                       equal_nan=True, atol=1e-9)
+    with pytest.raises(ConfigError, match="configs"):
+        solve_fields(motions, point_part, np.zeros((2, 4, 2)))
+    with pytest.raises(ConfigError, match="motions"):
+        solve_fields([], point_part, cfg)
+    with pytest.raises(ConfigError, match=r"motions\[1\]"):
+        solve_fields([motions[0], "Sink"], point_part, cfg)
+
+
+def test_solve_fields_rigid_part_and_cache_hits(rigid_part):
+    u1 = suite_motion("RigidU1")
+    cfg = grid_configs([0.0, 0.02], [0.0], [0.0, 1.0])
+    r = solve_fields([u1, u1], rigid_part, cfg, SolverSettings(), warm=False)
+    assert r.velocity.shape == (2, 4, 3)
+    assert np.allclose(r.velocity[0], r.velocity[1], equal_nan=True)
+    again = solve_fields([u1], rigid_part, cfg, SolverSettings(), warm=False)
+    assert again.cache_hits == 4 and np.all(again.periods == 0)
+
+
+def test_warm_starts_from_a_previous_call_cost_about_one_period_at_the_same_accuracy(point_part):
+    sink = suite_motion("Sink")
+    cfg = np.random.default_rng(3).uniform(-0.06, 0.06, (30, 2))
+    warm = WarmStarts()
+    cold = solve_fields([sink], point_part, cfg, NOCACHE, warm=warm)
+    # A design Jacobian's perturbed motion: the amplitudes changed by 1e-4.
+    near = PlateMotion(sink.frequency_hz, sink.k, sink.amplitude * 1.0001, sink.phase)
+    fresh = solve_fields([near], point_part, cfg, NOCACHE, warm=False)
+    again = solve_fields([near], point_part, cfg, NOCACHE, warm=warm)
+    ok = fresh.valid[0]
+    assert again.periods[0][ok].mean() < 0.7 * fresh.periods[0][ok].mean()
+    tol = 1e-5 * 0.06  # fixed_point_rtol x a velocity scale of this motion
+    assert np.abs(again.velocity[0][ok] - fresh.velocity[0][ok]).max() < tol
+    assert len(warm) == int(cold.valid.sum())
+
+
+def test_one_sticking_heavy_motion_for_the_benchmark_and_the_goal_presets():
+    data = Path(__file__).resolve().parents[2] / "ppod_ros" / "data" / "motions"
+    for path in sorted(data.glob("*.yaml")):
+        twin = CONFIG / "motions" / path.name
+        if twin.exists():
+            assert twin.read_text() == path.read_text(), f"{path.name} differs between the preset and config copies"
+    assert PlateMotion.from_yaml(data / "StickingHeavy.yaml").key == suite_motion("StickingHeavy").key

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ppod_ros.errors import ConfigError
+from ppod_ros.estimation.acquisition import check_samples_alive, check_summaries_alive
 from ppod_ros.estimation.harmonic_fit import HealthSettings, fit_harmonics
 from ppod_ros.estimation.layout import AccelerometerLayout
 from ppod_ros.estimation.recording import AccelRecording
@@ -94,6 +95,7 @@ class AccelEstimator:
             Layout channel names of the columns (default: the layout's order, all channels).
         """
         idx = self._columns(channels, np.shape(samples_mps2)[-1] if np.ndim(samples_mps2) == 2 else -1)
+        check_samples_alive(samples_mps2, [self.layout.names[i] for i in idx])
         fit = fit_harmonics(
             time_s,
             samples_mps2,
@@ -112,6 +114,31 @@ class AccelEstimator:
             list(fit.suspect),
             fit.cycles,
         )
+
+    def from_cycle(self, samples_mps2: np.ndarray, sample_rate_hz: float, cycles: int = 1,
+                   channels: Sequence[str] | None = None) -> PlateEstimate:
+        """Estimate from whole saved cycles sampled evenly from a cycle start.
+
+        The plate's frequency is the data's own, ``cycles * sample_rate_hz / N`` (a lab that saves one
+        cycle of 263 samples at 10 kHz ran at 38.02 Hz, not its nominal 38 Hz: fitting the nominal
+        frequency would leak 0.2-0.6 % of the signal into the wrong phases).
+
+        Parameters
+        ----------
+        samples_mps2 : array_like, shape (N, C)
+        sample_rate_hz : float
+        cycles : int
+            Whole plate cycles the N samples span.
+        """
+        n = np.shape(samples_mps2)[0] if np.ndim(samples_mps2) == 2 else 0
+        if not (np.isfinite(sample_rate_hz) and sample_rate_hz > 0):
+            raise ConfigError(f"sample_rate_hz: must be a finite number > 0 Hz, got {sample_rate_hz}")
+        if not (isinstance(cycles, (int, np.integer)) and cycles >= 1):
+            raise ConfigError(f"cycles: expected an integer >= 1, got {cycles!r}")
+        if n < 2:
+            raise ConfigError(f"samples_mps2: expected shape (N >= 2, C), got {np.shape(samples_mps2)}")
+        t = np.arange(n) / float(sample_rate_hz)
+        return self.from_samples(t, samples_mps2, cycles * float(sample_rate_hz) / n, channels=channels)
 
     def from_summaries(
         self,
@@ -157,6 +184,7 @@ class AccelEstimator:
             )
         n_cyc, K, C = P.shape
         idx = self._columns(channels, C)
+        check_summaries_alive(P, [self.layout.names[i] for i in idx])
         if faulty is not None:
             flags = np.asarray(faulty, dtype=bool)
             flags = np.broadcast_to(flags if flags.ndim == 2 else flags[None], (n_cyc, C))

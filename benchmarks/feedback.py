@@ -54,6 +54,19 @@ def suite_motions() -> list[Path]:
     return sorted(Path(str(resources.files("ppod_ros") / "data" / "motions")).glob("*.yaml"))
 
 
+_CALIBRATION: list = []
+
+
+def simulated_calibration():
+    """The array calibration of the simulated device (its default sensor errors), made once."""
+    if not _CALIBRATION:
+        from ppod_ros.device import default_device_config
+        from ppod_sim.calibration import calibrate_simulated_device
+
+        _CALIBRATION.append(calibrate_simulated_device(default_device_config(), seed=97))
+    return _CALIBRATION[0]
+
+
 class _Rig:
     """A simulated device, the waveform generator's core and the feedback loop, in this process.
 
@@ -63,7 +76,7 @@ class _Rig:
 
     scale = np.array([1, 1, 1, 0.1, 0.1, 0.1])  # angular axes in m/s^2 at L = 0.1 m (PHYSICS.md)
 
-    def __init__(self, seed: int, plant_learning: bool = True):
+    def __init__(self, seed: int, plant_learning: bool = True, calibrated: bool = True):
         from ppod_ros.actuation.generator import WaveformGenerator
         from ppod_ros.actuation.planning import GoalPlanner
         from ppod_ros.can import DeviceLink, open_bus
@@ -77,7 +90,10 @@ class _Rig:
         self.device = SimDevice(config, self.buses[0], seed=seed)
         self.link = DeviceLink(self.buses[1], config)
         self.gen = WaveformGenerator(self.link, GoalPlanner(config))
-        self.loop = FeedbackLoop(config, plant_learning=PlantLearningSettings(enabled=plant_learning))
+        # The device's sensors have their default (lab-like) errors; the feedback uses the array
+        # calibration that ppod calibrate accel stores, made once per process on a simulated device.
+        self.loop = FeedbackLoop(config, plant_learning=PlantLearningSettings(enabled=plant_learning),
+                                 calibration=simulated_calibration() if calibrated else None)
         self.summaries: list = []
         self.link.on_summary.append(self.summaries.append)
 

@@ -46,12 +46,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--iterations", type=int, default=8, help="learning iterations per run (default 8)")
     parser.add_argument("--quick", action="store_true", help="first three motions, 5 iterations")
     parser.add_argument("--no-sequence", action="store_true", help="skip the goal-sequence section")
+    parser.add_argument("--sections", nargs="+", choices=sorted(SECTIONS), default=["motions", "sequence"],
+                        help="sections to run (default: motions sequence); real: the PPOD2 lab's data "
+                             "(estimation against the lab, injected faults, dead acquisitions, calibration)")
+    parser.add_argument("--uncalibrated", action="store_true",
+                        help="feedback on the nominal layout (no array calibration) despite the sensor errors")
 
 
 def suite_motions() -> list[Path]:
     from importlib import resources
 
     return sorted(Path(str(resources.files("ppod_ros") / "data" / "motions")).glob("*.yaml"))
+
+
+_CALIBRATION: list = []
+_CALIBRATED = True  # --uncalibrated clears it
+
+
+def simulated_calibration():
+    """The array calibration of the simulated device (its default sensor errors), made once."""
+    if not _CALIBRATION:
+        from ppod_ros.device import default_device_config
+        from ppod_sim.calibration import calibrate_simulated_device
+
+        _CALIBRATION.append(calibrate_simulated_device(default_device_config(), seed=97))
+    return _CALIBRATION[0]
 
 
 class _Rig:
@@ -63,7 +82,7 @@ class _Rig:
 
     scale = np.array([1, 1, 1, 0.1, 0.1, 0.1])  # angular axes in m/s^2 at L = 0.1 m (PHYSICS.md)
 
-    def __init__(self, seed: int, plant_learning: bool = True):
+    def __init__(self, seed: int, plant_learning: bool = True, calibrated: bool = True):
         from ppod_ros.actuation.generator import WaveformGenerator
         from ppod_ros.actuation.planning import GoalPlanner
         from ppod_ros.can import DeviceLink, open_bus
@@ -77,7 +96,10 @@ class _Rig:
         self.device = SimDevice(config, self.buses[0], seed=seed)
         self.link = DeviceLink(self.buses[1], config)
         self.gen = WaveformGenerator(self.link, GoalPlanner(config))
-        self.loop = FeedbackLoop(config, plant_learning=PlantLearningSettings(enabled=plant_learning))
+        # The device's sensors have their default (lab-like) errors; the feedback uses the array
+        # calibration that ppod calibrate accel stores, made once per process on a simulated device.
+        self.loop = FeedbackLoop(config, plant_learning=PlantLearningSettings(enabled=plant_learning),
+                                 calibration=simulated_calibration() if calibrated and _CALIBRATED else None)
         self.summaries: list = []
         self.link.on_summary.append(self.summaries.append)
 
@@ -230,8 +252,23 @@ def run_sequence(goals, seed: int, plant_learning: bool, iterations: int = 4) ->
 
 
 def run(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    results = {}
+    for name in [s for s in SECTIONS if s in args.sections]:
+        if name == "sequence" and args.no_sequence:
+            continue
+        results[name] = SECTIONS[name](args, out)
+    (out / "feedback.json").write_text(json.dumps(results, indent=1, default=float))
+    print(f"\nwrote {out / 'feedback.json'}")
+    return 0
+
+
+def _motions_section(args: argparse.Namespace, out: Path) -> list[dict]:
     from ppod_ros.motion import PlateMotion
 
+    global _CALIBRATED
+    _CALIBRATED = not args.uncalibrated
     paths = args.motions or suite_motions()
     iterations = 5 if args.quick else args.iterations
     if args.quick:
@@ -247,7 +284,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"  {row['motion']} seed {seed}: "
                   + (f"rejected: {row['rejected']}" if "rejected" in row else
                      f"errors {[round(100 * e, 2) for e in row['errors']]} %"), flush=True)
-    print("\nClosed-loop acceleration error, simulated plant at default mismatch, noise on")
+    print("\nClosed-loop acceleration error, simulated plant at default mismatch, noise on, sensor errors on, "
+          + ("nominal layout (no calibration)" if args.uncalibrated else "array calibrated (ppod calibrate accel)"))
     print(f"{'motion':22s} {'seed':>4s} {'open loop':>10s} {'iter<=1%':>9s} {'err@5':>8s} {'out-of-goal':>11s} "
           f"{'est vs truth':>12s}")
     for r in rows:
@@ -258,14 +296,13 @@ def run(args: argparse.Namespace) -> int:
         name = r["motion"] if r["scale"] == 1 else f"{r['motion']} x{r['scale']:.2f}"
         print(f"{name:22s} {r['seed']:4d} {100 * r['open_loop']:9.2f}% {it:>9s} {100 * r['err_at_5']:7.3f}% "
               f"{100 * r['out_of_goal']:10.3f}% {100 * r['est_vs_truth_median']:11.3f}%")
-    sequences = [] if args.no_sequence else _sequences(args.seeds)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "feedback.json").write_text(json.dumps({"motions": rows, "sequences": sequences}, indent=1,
-                                                  default=float))
     _plot(rows, out / "feedback.png")
-    print(f"\nwrote {out / 'feedback.json'} and {out / 'feedback.png'}")
-    return 0
+    print(f"wrote {out / 'feedback.png'}")
+    return rows
+
+
+def _sequence_section(args: argparse.Namespace, out: Path) -> list[dict]:
+    return _sequences(args.seeds)
 
 
 def _sequences(seeds: list[int]) -> list[dict]:
@@ -304,3 +341,99 @@ def _plot(rows: list[dict], path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def _real_section(args: argparse.Namespace, out: Path) -> dict:
+    """The PPOD2 lab's saved cycles: a fresh default estimator against the lab, faults, dead data, calibration."""
+    from ppod_ros.estimation import AccelEstimator, EstimationError
+    from ppod_ros.estimation.calibration import MotionData, calibrate
+    from ppod_ros.estimation.faults import FAULTS, inject, swap_matters
+    from ppod_ros.estimation.harmonic_fit import fit_harmonics
+    from ppod_ros.estimation.ppod2 import read_ppod2_json
+    from ppod_ros.motion import acceleration_error
+
+    layout, records = read_ppod2_json(REAL_DATA)
+    print(f"\nReal data: {REAL_DATA.name} (PPOD2 lab, {len(records)} records, fresh AccelEstimator(layout, "
+          f"harmonics=6), nominal layout)")
+    print(f"{'record':12s} {'f (Hz)':>7s} {'vs lab':>8s}  dropped")
+    est_rows = []
+    for name, rec in records.items():
+        est = AccelEstimator(layout, harmonics=6).from_cycle(rec.samples_mps2, rec.sample_rate_hz)
+        lab = fit_harmonics(rec.time_s, rec.lab_estimate, rec.frequency_hz, 6).phasors
+        err = acceleration_error(lab, est.table(6))[1]
+        est_rows.append({"record": name, "vs_lab": err, "dropped": est.dropped})
+        print(f"{name:12s} {est.frequency_hz:7.2f} {100 * err:7.2f}%  {list(est.dropped) or '-'}")
+    fault_rows = {}
+    for fault, (n, _) in FAULTS.items():
+        cases = caught = 0
+        for name, rec in records.items():
+            if name == "Zeros":
+                continue
+            y = rec.samples_mps2
+            live = np.flatnonzero(np.sqrt(np.mean(y**2, axis=0)) >= 1.0)
+            combos = [(c,) for c in live] if n == 1 else [
+                (a, b) for i, a in enumerate(live) for b in live[i + 1:] if swap_matters(y, a, b)]
+            for chans in combos:
+                cases += 1
+                try:
+                    est = AccelEstimator(layout, harmonics=6).from_cycle(inject(y, fault, chans, seed=int(chans[0])),
+                                                                         rec.sample_rate_hz)
+                except EstimationError:
+                    caught += 1
+                    continue
+                caught += all(layout.names[c] in est.dropped for c in chans)
+        fault_rows[fault] = (caught, cases)
+    print("\nInjected faults on live channels (>= 1 m/s^2 RMS) of the 9 driven records: caught / cases")
+    for fault, (c, n) in fault_rows.items():
+        print(f"  {fault:8s} {c:4d} / {n:4d}  ({100 * c / n:.1f} %)")
+    dead = {"all zero": lambda y: np.zeros_like(y), "stuck ADC": lambda y: np.broadcast_to(y[0], y.shape).copy(),
+            "stopped": lambda y: np.vstack([y[: y.shape[0] // 2], np.broadcast_to(y[y.shape[0] // 2 - 1],
+                                                                                  (y.shape[0] - y.shape[0] // 2,
+                                                                                   y.shape[1]))])}
+    dead_rows = {}
+    for kind, kill in dead.items():
+        flagged = 0
+        for rec in records.values():
+            try:
+                AccelEstimator(layout, harmonics=6).from_cycle(kill(rec.samples_mps2), rec.sample_rate_hz)
+            except EstimationError as exc:
+                flagged += "dead acquisition" in str(exc)
+        dead_rows[kind] = (flagged, len(records))
+    print("Dead acquisitions flagged: " + ", ".join(f"{k} {f}/{n}" for k, (f, n) in dead_rows.items()))
+    motions = [MotionData.from_samples(n, r.time_s, r.samples_mps2, r.frequency_hz) for n, r in records.items()
+               if n != "Zeros"]
+    cal = calibrate(layout, motions)
+    print("\nCalibration on the real subset, each motion held out in turn (misfit = residual / reading)")
+    print(f"{'held-out motion':14s} {'nominal':>9s} {'calibrated':>11s}")
+    for name, v in cal.report.items():
+        print(f"{name:14s} {100 * v['nominal']:8.2f}% {100 * v['calibrated']:10.2f}%")
+    print("gains: " + " ".join(f"{n} {g:.3f}" for n, g in zip(cal.names, cal.gain)))
+    print("axis changes (deg): " + " ".join(f"{n} {d:.1f}" for n, d in zip(cal.names, cal.axis_change_deg)))
+    return {"estimation": est_rows, "faults": fault_rows, "dead": dead_rows, "calibration": cal.report}
+
+
+def _calibration_section(args: argparse.Namespace, out: Path) -> dict:
+    """Recovery of the simulated device's injected sensor errors by the calibration."""
+    from ppod_ros.device import default_device_config
+    from ppod_sim.sensors import SensorErrors
+
+    config = default_device_config()
+    cal = simulated_calibration()
+    w, _ = SensorErrors.default(config.accelerometers.num_channels).sensing(
+        np.asarray(config.accelerometers.position_m), np.asarray(config.accelerometers.axis))
+    gain = np.linalg.norm(w, axis=1)
+    gain /= gain.mean()
+    axis = w / np.linalg.norm(w, axis=1)[:, None]
+    gerr = np.abs(cal.gain - gain)
+    aerr = np.degrees(np.arccos(np.clip(np.sum(cal.axis * axis, axis=1), -1, 1)))
+    print("\nCalibration of the simulated device (default sensor errors, bending included), 6 motions")
+    print(f"{'channel':10s} {'true gain':>9s} {'fitted':>8s} {'gain err':>9s} {'axis err':>9s}")
+    for i, n in enumerate(cal.names):
+        print(f"{n:10s} {gain[i]:9.4f} {cal.gain[i]:8.4f} {100 * gerr[i]:8.2f}% {aerr[i]:7.2f} deg")
+    print(f"max gain error {100 * gerr.max():.2f} %, max axis error {aerr.max():.2f} deg")
+    return {"gain_error_max": float(gerr.max()), "axis_error_max_deg": float(aerr.max())}
+
+
+REAL_DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "ppod2_real_subset.json"
+SECTIONS = {"motions": _motions_section, "sequence": _sequence_section, "real": _real_section,
+            "calibration": _calibration_section}

@@ -13,7 +13,11 @@ Publishes PlateAcceleration (measured harmonics, goal, error, iteration, converg
 HarmonicCorrection (absolute, per actuator and harmonic, amperes) for the waveform generator, which
 alone validates, limits and applies it. On divergence it asks the generator to ramp the plate down
 (ppod/stop) and reports; channels that die are dropped while the rest still determine the motion,
-otherwise the node reports a fault and stops correcting. Diagnostics: channel health, data rate, error.
+otherwise the node reports a fault and stops correcting; a dead acquisition stops it too. The channel
+set the loop uses changes only on persistent evidence (ChannelSet), reported on /diagnostics
+("channel_set") with its reason, and learning restarts on a change. Publishes every received
+summary as AccelSummary (recorded by default, for ppod calibrate accel); uses the device's stored
+accelerometer calibration. Diagnostics: channel health, channel set, data rate, error.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from ppod_msgs.msg import HarmonicCorrection, PlateAcceleration, PlateMotionStatus
+from ppod_msgs.msg import AccelSummary, HarmonicCorrection, PlateAcceleration, PlateMotionStatus
 from std_srvs.srv import Trigger
 
 from ppod_nodes.common import diagnostics as diag
@@ -39,6 +43,8 @@ from ppod_ros.control.online import FeedbackLoop, LoopOutput, OnlineSettings
 from ppod_ros.device import load_device_config
 from ppod_ros.errors import ConfigError, PpodError
 from ppod_ros.estimation import EstimationError
+from ppod_ros.estimation.calibration import calibration_path, load_calibration
+from ppod_ros.estimation.channel_set import ChannelSetSettings
 
 
 class AccelFeedbackNode(PpodLifecycleNode):
@@ -58,6 +64,11 @@ class AccelFeedbackNode(PpodLifecycleNode):
               min_value=1e-9),
         Param("plant_forgetting", 0.95, "weight kept by earlier plant samples per new one", min_value=1e-3,
               max_value=1.0),
+        Param("channel_drop_after", 3, "estimates a channel must be dropped in before it leaves the set",
+              min_value=1, max_value=100),
+        Param("channel_restore_after", 10, "estimates a removed channel must pass before it rejoins",
+              min_value=1, max_value=1000),
+        Param("use_calibration", True, "use the accelerometer calibration stored for this device (ppod calibrate)"),
     )
 
     def __init__(self, **kwargs):
@@ -71,6 +82,7 @@ class AccelFeedbackNode(PpodLifecycleNode):
         self._last: LoopOutput | None = None
         self.accel_pub = self.create_lifecycle_publisher(PlateAcceleration, topics.ACCELERATION, qos.STREAM)
         self.corr_pub = self.create_lifecycle_publisher(HarmonicCorrection, topics.CORRECTION, qos.COMMANDS)
+        self.summary_pub = self.create_lifecycle_publisher(AccelSummary, topics.ACCEL_SUMMARIES, qos.STREAM)
         self._stop_client = self.create_client(Trigger, topics.STOP)
         self._diag_timer = self.create_timer(1.0, self._report)
 
@@ -86,8 +98,13 @@ class AccelFeedbackNode(PpodLifecycleNode):
         plant_learning = PlantLearningSettings(enabled=params["learn_plant"],
                                                prior_weight_a2=params["plant_prior_weight_a2"],
                                                forgetting=params["plant_forgetting"])
+        calibration = load_calibration(cache, config.name) if params["use_calibration"] else None
+        self.get_logger().info(f"accelerometer calibration: {calibration_path(cache, config.name)}"
+                               if calibration is not None else "accelerometer calibration: none (nominal layout)")
         self.loop = FeedbackLoop(config, settings, learning, store=CorrectionStore(cache),
-                                 plant_learning=plant_learning)
+                                 plant_learning=plant_learning, calibration=calibration,
+                                 channel_set=ChannelSetSettings(params["channel_drop_after"],
+                                                                params["channel_restore_after"]))
         self.bus = open_bus_waiting(config.can, params["bus_wait_s"])
         self.link = DeviceLink(self.bus, config)
         self.link.on_summary.append(self._on_summary)
@@ -154,6 +171,7 @@ class AccelFeedbackNode(PpodLifecycleNode):
         if self.lifecycle_state != "active" or self.loop is None:
             return
         self._received.append(time.monotonic())
+        self._publish_summary(summary)
         with self._lock:
             goal = self.loop.goal
             freq = goal.frequency_hz if goal is not None else summary.frequency_hz
@@ -162,6 +180,7 @@ class AccelFeedbackNode(PpodLifecycleNode):
             try:
                 out = self.loop.on_summary(summary.k, summary.phasors, freq, summary.samples_per_cycle, self._now())
             except EstimationError as exc:
+                # A dead acquisition or too few channels: never push on it; stop and say why.
                 self.diagnostics.set("channels", diag.ERROR, str(exc), **exc.channel_status)
                 self._active_goal_key = None
                 self.loop.set_goal(None, self._now())
@@ -173,7 +192,21 @@ class AccelFeedbackNode(PpodLifecycleNode):
         if out is None:
             return
         self._last = out
+        if out.channel_change is not None:
+            why = out.channel_change.describe()
+            self.get_logger().warn(f"accelerometer channel set changed: {why}; learning restarts")
+            self.diagnostics.set("channel_set", diag.WARN if self.loop.channels.removed else diag.OK,
+                                 f"channel set changed: {why}", **self.loop.channels.removed)
         self._publish(out)
+
+    def _publish_summary(self, summary) -> None:
+        msg = AccelSummary(frequency_hz=float(summary.frequency_hz), samples_per_cycle=int(summary.samples_per_cycle))
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.channels = list(self.loop.estimator.layout.names)
+        msg.k = [int(v) for v in summary.k]
+        msg.real_mps2 = np.asarray(summary.phasors).real.reshape(-1).tolist()
+        msg.imag_mps2 = np.asarray(summary.phasors).imag.reshape(-1).tolist()
+        self.summary_pub.publish(msg)
 
     def _publish(self, out: LoopOutput) -> None:
         est, step, goal = out.estimate, out.step, out.goal

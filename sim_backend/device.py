@@ -63,7 +63,7 @@ from ppod_ros.motion import MAX_HARMONIC, PlateMotion
 from ppod_sim.drive import ActuatorDrive
 from ppod_sim.plant import ChunkResult, PlantSimulator
 from ppod_sim.player import TablePlayer
-from ppod_sim.sensors import AccelerometerArray
+from ppod_sim.sensors import AccelerometerArray, SensorErrors
 from ppod_sim.tables import TableReceiver
 from ppod_sim.telemetry import Telemetry
 from ppod_sim.truth import CycleTruth
@@ -111,16 +111,21 @@ class SimDevice:
         The device's side of the bus (a python-can virtual bus in the simulator process).
     seed : int, optional
         Seed of the mismatch draws and the sensor noise (default ``config.sim.seed``).
+    sensor_errors : SensorErrors, optional
+        The accelerometers' gain, axis and bending errors (default: the lab-like
+        ``SensorErrors.default``; ``SensorErrors.none()`` for ideal sensors).
     """
 
-    def __init__(self, config: DeviceConfig, bus: can.BusABC, seed: int | None = None):
+    def __init__(self, config: DeviceConfig, bus: can.BusABC, seed: int | None = None,
+                 sensor_errors: SensorErrors | None = None):
         self.config = config
         self.bus = bus
         self.node = config.can.device_node_id
         seed = config.sim.seed if seed is None else int(seed)
         rng = np.random.default_rng(seed)
         self.drive = ActuatorDrive(config.sim.mismatch, np.random.default_rng(rng.integers(2**63)))
-        self.sensors = AccelerometerArray(config.accelerometers, np.random.default_rng(rng.integers(2**63)))
+        self.sensors = AccelerometerArray(config.accelerometers, np.random.default_rng(rng.integers(2**63)),
+                                          sensor_errors)
         self.plant = PlantSimulator(config)
         self.player = TablePlayer(self.drive, config.sim.idle_frequency_hz)
         self.counters = FrameCounters(self.node, "to_device")

@@ -31,6 +31,7 @@ SUBCOMMANDS: dict[str, str] = {
     "view": "view",
     "replay": "replay",
     "bench": "bench",
+    "calibrate": "calibrate",
 }
 
 EPILOG = """examples:

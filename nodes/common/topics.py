@@ -14,6 +14,7 @@ ESTOP = "ppod/emergency_stop"                    # std_srvs/Trigger: emergency s
 # accelerometer feedback
 ACCELERATION = "ppod/plate_acceleration"         # ppod_msgs/PlateAcceleration out
 CORRECTION = "ppod/harmonic_correction"          # ppod_msgs/HarmonicCorrection out -> generator
+ACCEL_SUMMARIES = "ppod/accel_summaries"         # ppod_msgs/AccelSummary     out (recorded by default)
 # camera and tracker
 IMAGE = "ppod/camera/image_raw"                  # sensor_msgs/Image
 CAMERA_INFO = "ppod/camera/camera_info"          # sensor_msgs/CameraInfo

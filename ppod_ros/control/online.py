@@ -36,7 +36,8 @@ from ppod_ros.control.plant import PlantModel
 from ppod_ros.control.store import CorrectionStore
 from ppod_ros.device.schema import DeviceConfig
 from ppod_ros.errors import ConfigError
-from ppod_ros.estimation import AccelEstimator, PlateEstimate
+from ppod_ros.estimation import AccelCalibration, AccelEstimator, PlateEstimate
+from ppod_ros.estimation.channel_set import ChannelSet, ChannelSetChange, ChannelSetSettings
 from ppod_ros.motion import PlateMotion
 
 
@@ -92,6 +93,8 @@ class LoopOutput:
     step: Any = None
     goal: PlateMotion | None = None
     stored: bool = False
+    #: The feedback's channel set changed with this estimate (learning restarted), else None.
+    channel_change: ChannelSetChange | None = None
 
 
 @dataclass
@@ -116,19 +119,26 @@ class FeedbackLoop:
         Learned corrections per goal (kept on convergence, reused for the same goal).
     plant_learning : PlantLearningSettings, optional
         How the plant is learned online (default: on).
+    calibration : AccelCalibration, optional
+        The device's stored array calibration (``ppod calibrate accel``), used by the estimator.
+    channel_set : ChannelSetSettings, optional
+        Hysteresis of the channel set the loop uses (:mod:`~ppod_ros.estimation.channel_set`).
     """
 
     def __init__(self, config: DeviceConfig, settings: OnlineSettings | None = None,
                  learning: LearningSettings | None = None,
                  plant_for: Callable[[PlateMotion, np.ndarray], PlantModel] | None = None,
                  store: CorrectionStore | None = None,
-                 plant_learning: PlantLearningSettings | None = None):
+                 plant_learning: PlantLearningSettings | None = None,
+                 calibration: AccelCalibration | None = None,
+                 channel_set: ChannelSetSettings | None = None):
         self.config = config
         self.settings = settings or OnlineSettings()
         self.learning = learning or LearningSettings()
         self.planner = GoalPlanner(config)
         self.estimator = AccelEstimator(config.accelerometers.layout, harmonics=self.settings.estimator_harmonics,
-                                        second_order_terms=self.settings.second_order_terms)
+                                        second_order_terms=self.settings.second_order_terms, calibration=calibration)
+        self.channels = ChannelSet(self.estimator.layout.names, channel_set)
         self.limits = DeviceLimits(max_current_a=config.limits.coil_current_a,
                                    max_step_a=config.limits.correction_step_a)
         # A goal's starting correction is bounded as the generator bounds it (limits.start_correction_a).
@@ -220,8 +230,21 @@ class FeedbackLoop:
             return None
         stack = np.stack(self._collect.phasors)
         self._collect = _Collect()
+        # Every estimate judges all channels (a gross fault is out of it at once); the set the loop
+        # uses changes only on persistent evidence, and a change restarts learning (ChannelSet).
         estimate = self.estimator.from_summaries(k, stack, frequency_hz)
-        out = LoopOutput(estimate, goal=self.goal)
+        change = self.channels.observe(dict(zip(estimate.channels, estimate.status)))
+        if self.channels.removed:
+            active = list(self.channels.active)
+            cols = self.estimator.layout.index(active)
+            estimate = self.estimator.from_summaries(k, stack[..., cols], frequency_hz, channels=active)
+        out = LoopOutput(estimate, goal=self.goal, channel_change=change)
+        if change is not None and self.controller is not None:
+            # Learning restarts from the correction applied now (the plate keeps its table): the
+            # history and states were measured with another channel set.
+            self.controller.reset(self.controller.correction_a)
+            self._resume_s = now_s
+            return out
         if self.controller is not None and self.controller.state != DIVERGED:
             ctrl = self.controller
             km = int(estimate.k.max())

@@ -9,10 +9,13 @@ Public API (docs/feedback.md):
   the tilted-gravity and second-order terms and drops dead channels while the rest determine the
   motion, else raises :class:`EstimationError`.
 - :class:`PlateEstimate`: phasors (K, 6), noise, channel status, residuals.
+- :func:`calibrate`, :class:`AccelCalibration`: per-channel gain and axis from several motions'
+  readings, stored per device (:mod:`~ppod_ros.estimation.calibration`).
 - :class:`AccelRecording`, :func:`read_recording`, :func:`write_recording`,
   :func:`register_reader`: recorded data (.npz, .csv; MCAP readers plug in).
 """
 
+from ppod_ros.estimation.calibration import AccelCalibration, CalibrationError, calibrate
 from ppod_ros.estimation.estimator import AccelEstimator
 from ppod_ros.estimation.harmonic_fit import HealthSettings, cycle_times, fit_harmonics
 from ppod_ros.estimation.layout import AccelerometerLayout, Observability
@@ -22,9 +25,12 @@ from ppod_ros.estimation.six_dof import EstimationError, PlateEstimate
 
 __all__ = [
     "SECOND_ORDER_TERMS",
+    "calibrate",
+    "AccelCalibration",
     "AccelEstimator",
     "AccelRecording",
     "AccelerometerLayout",
+    "CalibrationError",
     "EstimationError",
     "HealthSettings",
     "Observability",

@@ -17,6 +17,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from ppod_ros.errors import ConfigError
+from ppod_ros.estimation.acquisition import check_samples_alive, check_summaries_alive
+from ppod_ros.estimation.calibration import AccelCalibration
 from ppod_ros.estimation.harmonic_fit import HealthSettings, fit_harmonics
 from ppod_ros.estimation.layout import AccelerometerLayout
 from ppod_ros.estimation.recording import AccelRecording
@@ -41,6 +43,10 @@ class AccelEstimator:
         Second-order correction passes; stop when the relative change falls below ``tolerance``.
     health : HealthSettings
         Channel-check thresholds.
+    calibration : AccelCalibration, optional
+        The device's array calibration (:mod:`~ppod_ros.estimation.calibration`): readings are
+        divided by its gains, its axes replace the layout's, and each channel's misfit allowance
+        is set from its measured misfit.
     """
 
     def __init__(
@@ -53,6 +59,7 @@ class AccelEstimator:
         max_iterations: int = 8,
         tolerance: float = 1e-9,
         health: HealthSettings | None = None,
+        calibration: AccelCalibration | None = None,
     ):
         if not isinstance(layout, AccelerometerLayout):
             raise ConfigError(f"layout: expected an AccelerometerLayout, got {type(layout).__name__}")
@@ -62,6 +69,15 @@ class AccelEstimator:
             raise ConfigError(f"gravity_mps2: must be finite and >= 0, got {gravity_mps2}")
         if not (isinstance(max_iterations, int) and max_iterations >= 1 and tolerance > 0):
             raise ConfigError("max_iterations must be an integer >= 1 and tolerance > 0")
+        self.calibration = calibration
+        self._gain = np.ones(layout.num_channels)
+        allowance = None
+        if calibration is not None:
+            if not isinstance(calibration, AccelCalibration):
+                raise ConfigError(f"calibration: expected an AccelCalibration, got {type(calibration).__name__}")
+            layout = calibration.layout(layout)
+            self._gain = np.asarray(calibration.gain, float)
+            allowance = calibration.misfit_allowance()
         self.layout = layout
         self.harmonics = int(harmonics)
         self.terms = check_terms(second_order_terms)
@@ -70,7 +86,7 @@ class AccelEstimator:
         self.tolerance = float(tolerance)
         self.health = health or HealthSettings()
         self._solver = SixDofSolver(
-            layout, self.terms, self.gravity_mps2, self.health, max_iterations, self.tolerance
+            layout, self.terms, self.gravity_mps2, self.health, max_iterations, self.tolerance, allowance
         )
 
     # ------------------------------------------------------------------ entry points
@@ -94,12 +110,13 @@ class AccelEstimator:
             Layout channel names of the columns (default: the layout's order, all channels).
         """
         idx = self._columns(channels, np.shape(samples_mps2)[-1] if np.ndim(samples_mps2) == 2 else -1)
+        check_samples_alive(samples_mps2, [self.layout.names[i] for i in idx])
         fit = fit_harmonics(
             time_s,
-            samples_mps2,
+            np.asarray(samples_mps2, dtype=float) / self._gain[idx],
             frequency_hz,
             self.harmonics,
-            full_scale_mps2=self.layout.full_scale_mps2[idx],
+            full_scale_mps2=self.layout.full_scale_mps2[idx] / self._gain[idx],
             health=self.health,
         )
         return self._solver.solve(
@@ -112,6 +129,31 @@ class AccelEstimator:
             list(fit.suspect),
             fit.cycles,
         )
+
+    def from_cycle(self, samples_mps2: np.ndarray, sample_rate_hz: float, cycles: int = 1,
+                   channels: Sequence[str] | None = None) -> PlateEstimate:
+        """Estimate from whole saved cycles sampled evenly from a cycle start.
+
+        The plate's frequency is the data's own, ``cycles * sample_rate_hz / N`` (a lab that saves one
+        cycle of 263 samples at 10 kHz ran at 38.02 Hz, not its nominal 38 Hz: fitting the nominal
+        frequency would leak 0.2-0.6 % of the signal into the wrong phases).
+
+        Parameters
+        ----------
+        samples_mps2 : array_like, shape (N, C)
+        sample_rate_hz : float
+        cycles : int
+            Whole plate cycles the N samples span.
+        """
+        n = np.shape(samples_mps2)[0] if np.ndim(samples_mps2) == 2 else 0
+        if not (np.isfinite(sample_rate_hz) and sample_rate_hz > 0):
+            raise ConfigError(f"sample_rate_hz: must be a finite number > 0 Hz, got {sample_rate_hz}")
+        if not (isinstance(cycles, (int, np.integer)) and cycles >= 1):
+            raise ConfigError(f"cycles: expected an integer >= 1, got {cycles!r}")
+        if n < 2:
+            raise ConfigError(f"samples_mps2: expected shape (N >= 2, C), got {np.shape(samples_mps2)}")
+        t = np.arange(n) / float(sample_rate_hz)
+        return self.from_samples(t, samples_mps2, cycles * float(sample_rate_hz) / n, channels=channels)
 
     def from_summaries(
         self,
@@ -157,6 +199,8 @@ class AccelEstimator:
             )
         n_cyc, K, C = P.shape
         idx = self._columns(channels, C)
+        check_summaries_alive(P, [self.layout.names[i] for i in idx])
+        P = P / self._gain[idx]
         if faulty is not None:
             flags = np.asarray(faulty, dtype=bool)
             flags = np.broadcast_to(flags if flags.ndim == 2 else flags[None], (n_cyc, C))
@@ -176,6 +220,7 @@ class AccelEstimator:
                 raise ConfigError(
                     f"variance: expected finite values >= 0 of shape ({K}, {C}), got shape {var.shape}"
                 )
+            var = var / self._gain[idx] ** 2
         elif n_cyc >= 2:
             dev = np.where(good[:, None, :], np.abs(P - Y) ** 2, 0).sum(axis=0)
             var = dev / np.maximum(n_good - 1, 1) / np.maximum(n_good, 1)

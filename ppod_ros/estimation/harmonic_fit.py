@@ -54,6 +54,13 @@ class HealthSettings:
     model_floor : float
         Relative model uncertainty (calibration, unmodelled terms) added to the noise when
         normalising residuals, as a fraction of the RMS channel signal of each harmonic.
+    misfit_allowance : float
+        Fraction of its own reading by which the other channels' prediction of a channel may miss
+        before the channel counts as inconsistent (both this and ``residual_threshold`` must be
+        exceeded). A real array misfits by its sensors' gain and axis errors and the plate's bending:
+        up to 36 % of a weak channel's reading on the PPOD2 lab's device (docs/feedback.md), while a
+        halved, zeroed, sign-flipped or swapped channel misses by 75 % or more. A calibration's
+        measured per-channel misfit replaces it (``AccelEstimator(calibration=...)``).
     """
 
     min_valid_fraction: float = 0.5
@@ -64,6 +71,7 @@ class HealthSettings:
     max_fit_condition: float = 1.0e3
     residual_threshold: float = 5.0
     model_floor: float = 0.01
+    misfit_allowance: float = 0.5
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], where: str = "health") -> HealthSettings:
@@ -81,6 +89,7 @@ class HealthSettings:
             "max_fit_condition",
             "residual_threshold",
             "model_floor",
+            "misfit_allowance",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):

@@ -16,6 +16,7 @@ became unobservable.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -29,6 +30,9 @@ from ppod_ros.estimation.second_order import second_order_phasors
 from ppod_ros.motion import MAX_HARMONIC, PlateMotion
 
 OK = "ok"
+#: Most channels removed at once to make the rest consistent (two: a pair of swapped wires);
+#: beyond that, channels go one at a time (C(12, 2) = 66 refits per estimate at most).
+MAX_SUBSET_DROP = 2
 
 
 class EstimationError(DeviceError):
@@ -123,8 +127,19 @@ class SixDofSolver:
         health: HealthSettings,
         max_iterations: int,
         tolerance: float,
+        misfit_allowance: np.ndarray | None = None,
     ):
         self.layout = layout
+        # Relative misfit each layout channel may show against the others' prediction (C,): the
+        # device's own, from its calibration, else the settings' default for every channel.
+        allow = np.full(layout.num_channels, health.misfit_allowance)
+        if misfit_allowance is not None:
+            allow = np.asarray(misfit_allowance, dtype=float)
+            if allow.shape != (layout.num_channels,) or np.any(~(allow >= 0)):
+                raise ConfigError(
+                    f"misfit_allowance: expected {layout.num_channels} values >= 0, got {allow.tolist()}"
+                )
+        self.allowance = allow
         self.terms = tuple(terms)
         self.gravity_mps2 = gravity_mps2
         self.health = health
@@ -152,6 +167,10 @@ class SixDofSolver:
         )  # (K, C, 6)
         pos, ax = self.layout.position_m[idx], self.layout.axis[idx]
         thr = self.health.residual_threshold
+        allow = self.allowance[idx]
+        # Each channel's own reading (K-norm): a misfit is judged against it as well as against the
+        # noise, so that a live channel with a device-sized misfit (gain, axis, bending) is kept.
+        own = np.sqrt(np.sum(np.abs(np.nan_to_num(Y)) ** 2, axis=0))
         status: list[str] = [OK if f is None else f for f in fatal]
         usable = np.array([s == OK for s in status])
         pending = {c: suspect[c] for c in np.flatnonzero(usable) if suspect[c] is not None}
@@ -181,8 +200,9 @@ class SixDofSolver:
                     use[c] = admitted = True
             if admitted:
                 continue
-            z_in = self._studentized(H, P, R, scale2, use)
-            if unverified and z_in.max() > thr:
+            z_in, rel_in = self._studentized(H, P, R, scale2, use, own)
+            bad_in = (z_in > thr) & (rel_in > allow)
+            if unverified and bad_in.any():
                 bad = ", ".join(f"{names[c]} ({why})" for c, why in unverified.items())
                 raise EstimationError(
                     f"accelerometer channels {bad} look dead, and the other channels cannot determine the "
@@ -190,18 +210,29 @@ class SixDofSolver:
                     f"(residual {z_in.max():.1f} sigma at {names[int(np.argmax(z_in))]})",
                     dict(zip(names, status)),
                 )
-            worst, z_out = self._leave_one_out(idx, H, Yc, scale2, use)
-            if worst is not None and z_out > thr:
-                use[worst] = False
-                status[worst] = f"inconsistent residual ({z_out:.1f} sigma)"
+            # Find the fewest channels whose removal leaves a consistent set (two swapped wires
+            # are two bad channels at once, and removing one at a time can blame a good one; a
+            # bad channel next to its near-collinear twin pulls the fit and hides in-sample), else
+            # remove the one that best explains the misfit.
+            found = self._consistent_subset(idx, H, Yc, scale2, use, own, thr, allow)
+            if not found:
+                worst, z_out, rel_out = self._leave_one_out(idx, H, Yc, scale2, use, own, thr, allow)
+                found = [] if worst is None else [(worst, z_out, rel_out)]
+            for c, z_out, rel_out in found:
+                use[c] = False
+                status[c] = (
+                    f"inconsistent residual ({z_out:.1f} sigma, {rel_out:.0%} of its reading; "
+                    f"allowed {allow[c]:.0%})"
+                )
+            if found:
                 continue
             # Leave-one-out found nobody to blame; an inconsistency left is in a channel the layout
             # cannot spare (it could not be left out), so the estimate cannot be trusted.
-            for c in np.flatnonzero(z_in > thr):
+            for c in np.flatnonzero(bad_in):
                 rest = use.copy()
                 rest[c] = False
                 if not self._determined(idx, rest):
-                    status[c] = f"inconsistent residual ({z_in[c]:.1f} sigma)"
+                    status[c] = f"inconsistent residual ({z_in[c]:.1f} sigma, {rel_in[c]:.0%} of its reading)"
                     self._require(
                         idx,
                         rest,
@@ -229,24 +260,95 @@ class SixDofSolver:
 
     @staticmethod
     def _studentized(
-        H: np.ndarray, P: np.ndarray, R: np.ndarray, scale2: np.ndarray, use: np.ndarray
-    ) -> np.ndarray:
-        """In-sample residual of each used channel in sigmas, corrected for its leverage (0 if untestable)."""
+        H: np.ndarray, P: np.ndarray, R: np.ndarray, scale2: np.ndarray, use: np.ndarray, own: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """In-sample residual of each used channel, corrected for its leverage (0 if untestable).
+
+        Returns it in sigmas of noise plus model floor, and as a fraction of the channel's reading.
+        """
         lev = np.einsum("kcj,kjc->c", H, P) / H.shape[0]
         z = np.zeros(use.size)
+        rel = np.zeros(use.size)
         ok = use & (lev < 1 - 1e-6)
-        z[ok] = np.sqrt(np.sum(np.abs(R[:, ok]) ** 2, axis=0) / (1 - lev[ok]) / np.sum(scale2[:, ok], axis=0))
-        return z
+        r2 = np.sum(np.abs(R[:, ok]) ** 2, axis=0) / (1 - lev[ok])
+        z[ok] = np.sqrt(r2 / np.sum(scale2[:, ok], axis=0))
+        with np.errstate(divide="ignore"):
+            rel[ok] = np.sqrt(r2) / own[ok]
+        return z, rel
+
+    def _consistent_subset(
+        self,
+        idx: np.ndarray,
+        H: np.ndarray,
+        Yc: np.ndarray,
+        scale2: np.ndarray,
+        use: np.ndarray,
+        own: np.ndarray,
+        thr: float,
+        allow: np.ndarray,
+    ) -> list[tuple[int, float, float]]:
+        """The fewest used channels (at most ``MAX_SUBSET_DROP``) whose removal leaves a consistent set.
+
+        The rest must determine the motion and every one of its channels pass the in-sample test;
+        every removed channel must fail the others' prediction. Among candidate sets of one size,
+        the one with the smallest normalised residual power. Returns (channel, sigmas, fraction)
+        per removed channel, or [] when no such set exists.
+        """
+        used = np.flatnonzero(use)
+        K = H.shape[0]
+        for m in range(1, MAX_SUBSET_DROP + 1):
+            best, best_chi2 = [], math.inf
+            for drop in itertools.combinations(used.tolist(), m):
+                rest = use.copy()
+                rest[list(drop)] = False
+                if not self._determined(idx, rest):
+                    continue
+                P = np.stack([np.linalg.pinv(H[i][rest]) for i in range(K)])
+                U = np.einsum("kjc,kc->kj", P, Yc[:, rest])
+                R = Yc - np.einsum("kcj,kj->kc", H, U)
+                Pfull = np.zeros((K, 6, use.size))
+                Pfull[:, :, rest] = P
+                z_in, rel_in = self._studentized(H, Pfull, R, scale2, rest, own)
+                if np.any((z_in > thr) & (rel_in > allow)):
+                    continue
+                out = []
+                for c in drop:
+                    r_c = math.sqrt(np.sum(np.abs(R[:, c]) ** 2))
+                    # The rest's misfit reaches the prediction amplified by the prediction's gain
+                    # h (a channel the rest sees poorly, a twin of a removed one, is predicted poorly).
+                    h = float(np.mean(np.sum(np.abs(np.einsum("kj,kjc->kc", H[:, c], P)) ** 2, axis=1)))
+                    z = r_c / math.sqrt(np.sum(scale2[:, c]) * (1 + h))
+                    rel = r_c / own[c] / math.sqrt(1 + h) if own[c] > 0 else math.inf
+                    out.append((c, z, rel))
+                if not all(z > thr and rel > allow[c] for c, z, rel in out):
+                    continue
+                chi2 = float(np.sum(np.abs(R[:, rest]) ** 2 / scale2[:, rest]))
+                if chi2 < best_chi2:
+                    best, best_chi2 = out, chi2
+            if best:
+                return best
+        return []
 
     def _leave_one_out(
-        self, idx: np.ndarray, H: np.ndarray, Yc: np.ndarray, scale2: np.ndarray, use: np.ndarray
-    ) -> tuple[int | None, float]:
-        """The used channel whose removal best explains the residuals, and its prediction residual (sigmas).
+        self,
+        idx: np.ndarray,
+        H: np.ndarray,
+        Yc: np.ndarray,
+        scale2: np.ndarray,
+        use: np.ndarray,
+        own: np.ndarray,
+        thr: float,
+        allow: np.ndarray,
+    ) -> tuple[int | None, float, float]:
+        """The inconsistent channel whose removal best explains the residuals (None if none is).
 
-        One bad channel pulls a least-squares fit towards itself and can make a good neighbour's
-        residual the largest; refitting without each candidate in turn does not suffer from that.
+        A channel is inconsistent when the others' prediction of it misses by more than ``thr``
+        sigmas of noise and model floor and by more than its misfit allowance (a fraction of its own
+        reading). One bad channel pulls a least-squares fit towards itself and can make a good
+        neighbour's residual the largest; refitting without each candidate in turn does not suffer
+        from that. Returns (channel, prediction residual in sigmas, as a fraction of its reading).
         """
-        best, best_chi2, best_z = None, math.inf, 0.0
+        best, best_chi2, best_z, best_rel = None, math.inf, 0.0, 0.0
         for c in np.flatnonzero(use):
             rest = use.copy()
             rest[c] = False
@@ -254,11 +356,15 @@ class SixDofSolver:
                 continue
             U = np.stack([np.linalg.pinv(H[i][rest]) @ Yc[i, rest] for i in range(H.shape[0])])
             R = Yc - np.einsum("kcj,kj->kc", H, U)
+            r_c = math.sqrt(np.sum(np.abs(R[:, c]) ** 2))
+            z = r_c / math.sqrt(np.sum(scale2[:, c]))
+            rel = r_c / own[c] if own[c] > 0 else math.inf
+            if not (z > thr and rel > allow[c]):
+                continue
             chi2 = float(np.sum(np.abs(R[:, rest]) ** 2 / scale2[:, rest]))
             if chi2 < best_chi2:
-                best, best_chi2 = int(c), chi2
-                best_z = math.sqrt(np.sum(np.abs(R[:, c]) ** 2) / np.sum(scale2[:, c]))
-        return best, best_z
+                best, best_chi2, best_z, best_rel = int(c), chi2, z, rel
+        return best, best_z, best_rel
 
     def _second_order_solve(self, U0, ks, Y, H, use, freq_hz, pos, ax):
         """Fixed-point iteration U = H^+ (Y - S(U)) on the channels in ``use``."""

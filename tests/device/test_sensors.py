@@ -9,7 +9,7 @@ import pytest
 from ppod_ros.device import default_device_config
 from ppod_ros.kinematics.stewart import rotation_matrix
 from ppod_ros.motion import GRAVITY_MPS2
-from ppod_sim.sensors import AccelerometerArray, specific_force
+from ppod_sim.sensors import AccelerometerArray, SensorErrors, specific_force
 
 X_AXIS = np.array([[1.0, 0.0, 0.0]])
 
@@ -47,7 +47,7 @@ def quiet_layout(**changes):
 
 
 def test_ac_coupling_removes_the_static_g_and_passes_vibration_with_its_documented_response():
-    sensors = AccelerometerArray(quiet_layout(), np.random.default_rng(0))
+    sensors = AccelerometerArray(quiet_layout(), np.random.default_rng(0), SensorErrors.none())
     f, dt, n = 30.0, 1 / 2100, 2100 * 3
     t = np.arange(n) * dt
     accel = np.zeros((n, 6))
@@ -60,14 +60,33 @@ def test_ac_coupling_removes_the_static_g_and_passes_vibration_with_its_document
     X = (2j / last.size) * np.sum(last * np.exp(-2j * np.pi * f * tt))
     assert pytest.approx(5.0 * sensors.high_pass_response(f, dt), abs=1e-4) == X
     assert abs(np.angle(sensors.high_pass_response(f, dt))) == pytest.approx(math.atan(0.1 / 30), rel=0.01)
-    still = AccelerometerArray(quiet_layout(), np.random.default_rng(0))
+    still = AccelerometerArray(quiet_layout(), np.random.default_rng(0), SensorErrors.none())
     assert np.allclose(still.read(np.zeros((10, 6)), np.zeros((10, 3)), gravity[:10], dt), 0.0, atol=1e-12)
 
 
 def test_noise_and_quantisation_follow_the_configuration():
     layout = quiet_layout(noise_mps2=0.05, quantisation_mps2=0.0048)
-    sensors = AccelerometerArray(layout, np.random.default_rng(1))
+    sensors = AccelerometerArray(layout, np.random.default_rng(1), SensorErrors.none())
     n = 4000
     y = sensors.read(np.zeros((n, 6)), np.zeros((n, 3)), np.tile([0, 0, -GRAVITY_MPS2], (n, 1)), 1 / 2000)
     assert np.allclose(y / 0.0048, np.round(y / 0.0048))
     assert np.std(y) == pytest.approx(0.05, rel=0.05)
+
+
+def test_default_sensor_errors_are_the_lab_like_gains_tilts_and_bending():
+    layout = quiet_layout(ac_coupling_hz=0.0)
+    ideal = AccelerometerArray(layout, np.random.default_rng(0), SensorErrors.none())
+    real = AccelerometerArray(layout, np.random.default_rng(0))  # default: errors on
+    accel = np.array([[1.0, 2.0, 10.0, 5.0, -3.0, 8.0]])
+    zero3 = np.zeros((1, 3))
+    y_ideal = ideal.read(accel, zero3, zero3, 1e-4)[0]
+    y_real = real.read(accel, zero3, zero3, 1e-4)[0]
+    gains = np.linalg.norm(real.axis, axis=1)
+    assert gains[6] == pytest.approx(0.92) and gains[8] == pytest.approx(1.06)
+    tilt = np.degrees(np.arcsin(real.axis[[6, 8], 2] / gains[[6, 8]]))
+    assert tilt == pytest.approx([4.0, -4.0])
+    # Vertical channels: gain x rigid reading + 2 % of the vertical acceleration, saddle-shaped.
+    theta = np.arctan2(real.position[:, 1], real.position[:, 0])
+    expect = gains[1::2] * y_ideal[1::2] + 0.02 * np.cos(2 * theta[1::2]) * 10.0
+    assert y_real[1::2] == pytest.approx(expect)
+    assert SensorErrors.default(6) == SensorErrors.none()  # other layouts: no errors by default

@@ -18,19 +18,25 @@ from ppod_ros.device import Mismatch, default_device_config
 from ppod_ros.errors import ConfigError, LimitError, PpodError
 from ppod_ros.motion import PlateMotion, acceleration_error
 from ppod_sim.device import SimDevice
+from ppod_sim.sensors import SensorErrors
 
 _channels = itertools.count()
 LINESINKX = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0], ramp_time_s=0.2)
 
 
 class Rig:
-    """A simulated device, a host link and a passive listener on one virtual bus."""
+    """A simulated device, a host link and a passive listener on one virtual bus.
 
-    def __init__(self, config=None, seed=None):
+    Ideal sensors by default: these tests compare the device's readings with the nominal layout
+    (the sensor errors have their own tests in test_sensors.py).
+    """
+
+    def __init__(self, config=None, seed=None, sensor_errors=None):
         base = config or default_device_config()
         self.config = base.with_can(interface="virtual", channel=f"test-device-{next(_channels)}")
         self.buses = [open_bus(self.config.can) for _ in range(3)]
-        self.device = SimDevice(self.config, self.buses[0], seed)
+        self.device = SimDevice(self.config, self.buses[0], seed,
+                                sensor_errors=SensorErrors.none() if sensor_errors is None else sensor_errors)
         self.link = DeviceLink(self.buses[1], self.config)
         self.spy = self.buses[2]
         self.planner = GoalPlanner(self.config)

@@ -18,6 +18,7 @@ from ppod_ros.actuation.planning import GoalPlanner
 from ppod_ros.can import AckResult, DeviceLink, DeviceState, open_bus
 from ppod_ros.device import default_device_config
 from ppod_ros.motion import PlateMotion, acceleration_error
+from ppod_sim.sensors import SensorErrors
 
 LINESINKX = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0], ramp_time_s=0.2)
 
@@ -76,10 +77,13 @@ def test_a_goal_runs_across_processes_and_the_watchdog_stops_it_when_heartbeats_
         at_start = link.counters.summaries
         assert link.wait_for(lambda: link.counters.summaries >= at_start + 20, timeout_s=10.0)
         assert link.status.state == DeviceState.ENABLED and link.status.active_seq == seq
-        # The device's accelerometer summaries agree with the goal through the first-order model.
+        # The device's accelerometer summaries agree with the goal through the first-order model of
+        # its (default, lab-like) sensors: gains, tilted axes, bending.
         s = link.summaries[-1]
         layout = config.accelerometers
-        H = np.hstack([layout.axis, np.cross(layout.position_m, layout.axis)])
+        w, bend = SensorErrors.default(12).sensing(np.asarray(layout.position_m), np.asarray(layout.axis))
+        H = np.hstack([w, np.cross(layout.position_m, w)])
+        H[:, 2] += bend
         expected = H @ LINESINKX.phasor_table(1)[0]
         assert np.max(np.abs(s.phasors[0] - expected)) < 0.02 * np.max(np.abs(expected))
         assert s.frequency_hz == 30.0 and s.table_seq == seq

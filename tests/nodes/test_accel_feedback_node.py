@@ -8,19 +8,26 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 def test_feedback_drives_the_plate_to_the_goal_within_one_percent(ros, tmp_path):
-    from ppod_msgs.msg import HarmonicCorrection, PlateAcceleration
+    from ppod_msgs.msg import AccelSummary, HarmonicCorrection, PlateAcceleration
     from ppod_msgs.srv import SetPlateMotion
     from rclpy.parameter import Parameter
 
+    from ppod_bench.feedback import simulated_calibration
     from ppod_nodes.accel_feedback import AccelFeedbackNode
     from ppod_nodes.common import qos, topics
     from ppod_nodes.common.convert import motion_to_msg
     from ppod_nodes.waveform_generator import WaveformGeneratorNode
+    from ppod_ros.device import default_device_config
+    from ppod_ros.estimation.calibration import save_calibration
     from ppod_ros.motion import PlateMotion, acceleration_error
 
     goal = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0], name="LineSinkX",
                               ramp_time_s=0.2)
+    # The simulated sensors have their default (lab-like) errors: the node uses the array
+    # calibration stored for the device, as `ppod calibrate accel --simulated` makes it.
+    save_calibration(simulated_calibration(), tmp_path, default_device_config().name)
     with SimThread(seed=4) as sim:
+        summaries = ros.collect(AccelSummary, topics.ACCEL_SUMMARIES, qos.STREAM)
         bus = [Parameter("can_interface", value="virtual"), Parameter("can_channel", value=sim.channel)]
         accel = ros.collect(PlateAcceleration, topics.ACCELERATION, qos.STREAM)
         corr = ros.collect(HarmonicCorrection, topics.CORRECTION, qos.COMMANDS)
@@ -43,5 +50,47 @@ def test_feedback_drives_the_plate_to_the_goal_within_one_percent(ros, tmp_path)
         K = truth.shape[0]
         _, rel = acceleration_error(goal.phasor_table(K), truth)
         assert rel <= 0.015
+        # Every device summary is published (and so recorded by default) for calibration.
+        assert summaries and len(summaries[-1].channels) == 12
+        assert len(summaries[-1].real_mps2) == len(summaries[-1].k) * 12
         assert list(tmp_path.rglob("*.npz")), "the converged correction is stored for this goal"
+        gen.trigger_deactivate()
+
+
+def test_a_channel_that_dies_leaves_the_set_once_reported_on_diagnostics_with_its_reason(ros, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from ppod_msgs.srv import SetPlateMotion
+    from rclpy.parameter import Parameter
+
+    from ppod_nodes.accel_feedback import AccelFeedbackNode
+    from ppod_nodes.common import diagnostics as diag
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.convert import motion_to_msg
+    from ppod_nodes.waveform_generator import WaveformGeneratorNode
+    from ppod_ros.motion import PlateMotion
+
+    goal = PlateMotion.single(30, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0], name="LineSinkX",
+                              ramp_time_s=0.2)
+    with SimThread(seed=5) as sim:
+        sim.device.sensors.axis[3] = 0.0  # u110.z senses nothing: it reads noise (a broken sensor)
+        bus = [Parameter("can_interface", value="virtual"), Parameter("can_channel", value=sim.channel)]
+        diags = ros.collect(DiagnosticArray, topics.DIAGNOSTICS, qos.STREAM)
+        gen = ros.make(WaveformGeneratorNode, parameter_overrides=bus)
+        fb = ros.make(AccelFeedbackNode, parameter_overrides=[*bus, Parameter("cache_dir", value=str(tmp_path))])
+        for node in (gen, fb):
+            node.trigger_configure()
+            node.trigger_activate()
+        assert ros.call(SetPlateMotion, "/" + topics.SET_MOTION,
+                        SetPlateMotion.Request(motion=motion_to_msg(goal))).accepted
+
+        def channel_set():
+            return [s for a in diags for s in a.status if s.name.endswith("channel_set")]
+
+        assert ros.wait_until(lambda: channel_set(), 20)
+        status = channel_set()[-1]
+        name = fb.loop.estimator.layout.names[3]
+        assert status.level == diag.WARN and name in status.message
+        assert [v.key for v in status.values] == [name] and "consecutive estimates" in status.values[0].value
+        assert fb.loop.channels.active == tuple(n for n in fb.loop.estimator.layout.names if n != name)
+        fb.trigger_deactivate()
         gen.trigger_deactivate()

@@ -1,0 +1,472 @@
+"""Array calibration from operating data: per-channel gain and sensing axis, with uncertainties.
+
+The array is redundant (12 channels for 6 rigid-body components), so recorded cycles over several
+motions determine, besides each motion's plate acceleration, every channel's sensitivity vector
+``w_c = g_c e_c`` (gain times unit axis): a channel reads ``w_c . (p'' + alpha x l_c')`` per
+harmonic (``l_c'`` the lever with the tilted-gravity term, as in the layout's measurement matrix).
+The model is bilinear; :func:`calibrate` alternates the two linear least-squares problems (all
+``w_c`` given the motions, all motions given the ``w_c``), removing the second-order terms at the
+current motion estimate. Positions stay nominal (on a rigid plate they trade off against the
+axes and the motions and are poorly identified from a few motions; not fitted).
+
+What the array cannot see: a common gain of all channels (every ``w_c`` times s and every motion
+divided by s read the same). It is fixed by the convention ``mean gain = 1`` and reported in
+``AccelCalibration.unobservable``, with any other direction the data leave unobserved.
+
+The fit is refused (:class:`CalibrationError`) when some channel's sensitivity is ill-conditioned:
+the recorded motions do not accelerate the plate at that channel in enough directions; the message
+names the channel, the direction it lacks and the kind of motion that would supply it.
+
+Cross-validation: each motion in turn is held out, the calibration fitted on the others (when they
+suffice), and the held-out motion's misfit (the readings the fitted rigid-body motion does not
+explain, relative to the readings) compared with the nominal layout's on the same motion.
+
+Stored per device as JSON: ``<cache_dir>/<device_id>/accel_calibration.json``
+(:func:`save_calibration`, :func:`load_calibration`); ``AccelEstimator(..., calibration=...)`` uses it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ppod_ros.errors import ConfigError
+from ppod_ros.estimation.harmonic_fit import fit_harmonics
+from ppod_ros.estimation.layout import AccelerometerLayout
+from ppod_ros.estimation.recording import AccelRecording
+from ppod_ros.estimation.second_order import SECOND_ORDER_TERMS, check_terms, second_order_phasors
+from ppod_ros.motion import GRAVITY_MPS2
+
+#: Largest condition number of a channel's excitation (its 3 x 3 sensitivity normal matrix, square
+#: root) for its gain and axis to be fitted: beyond it one direction is seen 30x less than another.
+MAX_CHANNEL_CONDITION = 30.0
+#: Alternating least-squares passes, and the relative change of the sensitivities that ends them.
+MAX_PASSES = 200
+PASS_TOLERANCE = 1e-10
+#: A channel's misfit allowance in the estimator: this multiple of its cross-validated misfit ...
+ALLOWANCE_FACTOR = 3.0
+#: ... but never below this fraction of its reading (noise, motions unlike the calibration's).
+MIN_ALLOWANCE = 0.15
+#: Singular values below this fraction of the largest (Jacobian, scaled columns) count as unobserved.
+NULL_TOLERANCE = 1e-9
+#: File name of a device's calibration in its cache folder.
+CALIBRATION_FILE = "accel_calibration.json"
+
+
+class CalibrationError(ConfigError):
+    """The recorded motions do not determine the calibration (ill-conditioned); nothing was fitted."""
+
+
+@dataclass(frozen=True, eq=False)
+class MotionData:
+    """One motion's per-channel harmonic phasors.
+
+    Parameters
+    ----------
+    name : str
+    frequency_hz : float
+    k : ndarray of int, shape (K,)
+    phasors : complex ndarray, shape (K, C)
+        Per-channel readings (m/s^2), channels in the layout's order.
+    """
+
+    name: str
+    frequency_hz: float
+    k: np.ndarray
+    phasors: np.ndarray
+
+    @classmethod
+    def from_samples(cls, name: str, time_s: np.ndarray, samples_mps2: np.ndarray, frequency_hz: float,
+                     harmonics: int = 6) -> MotionData:
+        fit = fit_harmonics(time_s, samples_mps2, frequency_hz, harmonics)
+        if np.any(fit.fatal):
+            bad = [i for i, f in enumerate(fit.fatal) if f]
+            raise ConfigError(f"{name}: channels {bad} unusable for calibration: {[fit.fatal[i] for i in bad]}")
+        return cls(name, float(frequency_hz), fit.k, fit.phasors)
+
+    @classmethod
+    def from_recording(cls, recording: AccelRecording, layout: AccelerometerLayout, harmonics: int = 6
+                       ) -> list[MotionData]:
+        """One MotionData per segment (raw samples fitted, summaries averaged), columns in layout order."""
+        idx = layout.index(list(recording.channels))
+        if sorted(idx.tolist()) != list(range(layout.num_channels)):
+            raise ConfigError(
+                f"recording channels {list(recording.channels)} must be the layout's {list(layout.names)}"
+            )
+        order = np.argsort(idx)
+        base = str(recording.meta.get("motion", "segment"))
+        out = []
+        for s in recording.segments():
+            a, b = recording.segment_data(s)
+            name = f"{base}[{s}]" if len(recording.segments()) > 1 else base
+            if recording.kind == "samples":
+                out.append(cls.from_samples(name, a, b[:, order], recording.frequency_hz, harmonics))
+            else:
+                P = np.nanmean(b, axis=0)[:, order]
+                out.append(cls(name, recording.frequency_hz, np.asarray(a), P))
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class AccelCalibration:
+    """A fitted array calibration (see the module docstring).
+
+    Attributes
+    ----------
+    names : tuple of str, length C
+    gain : ndarray (C,)
+        Sensitivity relative to nominal (mean 1 by convention).
+    axis : ndarray (C, 3)
+        Fitted unit sensing axes (plate frame).
+    nominal_axis, position_m : ndarray (C, 3)
+    gain_std : ndarray (C,)
+    axis_std_deg : ndarray (C,)
+        One-sigma uncertainties from the fit's residuals.
+    misfit : ndarray (C,)
+        Each channel's cross-validated misfit (residual / reading, median over held-out motions);
+        the fit's own where no cross-validation was possible.
+    motions : tuple of str
+    unobservable : tuple of str
+        Directions the data cannot see, and how each was fixed.
+    report : dict
+        Per-motion cross-validation: ``{motion: {"nominal": misfit, "calibrated": misfit}}``.
+    """
+
+    names: tuple[str, ...]
+    gain: np.ndarray
+    axis: np.ndarray
+    nominal_axis: np.ndarray
+    position_m: np.ndarray
+    gain_std: np.ndarray
+    axis_std_deg: np.ndarray
+    misfit: np.ndarray
+    motions: tuple[str, ...]
+    unobservable: tuple[str, ...]
+    report: dict[str, dict[str, float]] = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+    #: Orthonormal basis (3C, n) of the sensitivity changes the data could not see (not stored).
+    unobserved_basis: np.ndarray | None = None
+
+    @property
+    def axis_change_deg(self) -> np.ndarray:
+        """Angle between the fitted and nominal axis of each channel (degrees)."""
+        cos = np.clip(np.sum(self.axis * self.nominal_axis, axis=1), -1.0, 1.0)
+        return np.degrees(np.arccos(cos))
+
+    def layout(self, nominal: AccelerometerLayout) -> AccelerometerLayout:
+        """``nominal`` with the fitted axes (names and positions must match)."""
+        if tuple(nominal.names) != self.names:
+            raise ConfigError(f"calibration channels {list(self.names)} differ from the layout's {list(nominal.names)}")
+        return AccelerometerLayout(nominal.names, nominal.position_m, self.axis, nominal.full_scale_mps2,
+                                   nominal.max_condition, nominal.length_scale_m)
+
+    def misfit_allowance(self) -> np.ndarray:
+        """Per-channel misfit allowance for the estimator (ALLOWANCE_FACTOR x misfit, >= MIN_ALLOWANCE)."""
+        return np.maximum(ALLOWANCE_FACTOR * self.misfit, MIN_ALLOWANCE)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": "ppod accel calibration 1",
+            "convention": "mean gain = 1; positions nominal",
+            "channels": [
+                {"name": n, "gain": float(self.gain[i]), "gain_std": float(self.gain_std[i]),
+                 "axis": [float(v) for v in self.axis[i]], "nominal_axis": [float(v) for v in self.nominal_axis[i]],
+                 "axis_std_deg": float(self.axis_std_deg[i]), "position_m": [float(v) for v in self.position_m[i]],
+                 "misfit": float(self.misfit[i])}
+                for i, n in enumerate(self.names)
+            ],
+            "motions": list(self.motions),
+            "unobservable": list(self.unobservable),
+            "cross_validation": self.report,
+            "meta": self.meta,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], where: str = "calibration") -> AccelCalibration:
+        try:
+            ch = data["channels"]
+            return cls(
+                tuple(c["name"] for c in ch),
+                np.array([c["gain"] for c in ch], float),
+                np.array([c["axis"] for c in ch], float),
+                np.array([c["nominal_axis"] for c in ch], float),
+                np.array([c["position_m"] for c in ch], float),
+                np.array([c["gain_std"] for c in ch], float),
+                np.array([c["axis_std_deg"] for c in ch], float),
+                np.array([c["misfit"] for c in ch], float),
+                tuple(data.get("motions", ())),
+                tuple(data.get("unobservable", ())),
+                dict(data.get("cross_validation", {})),
+                dict(data.get("meta", {})),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ConfigError(f"{where}: not an accelerometer calibration ({exc})") from exc
+
+
+# ---------------------------------------------------------------------- fit
+def _levers(layout: AccelerometerLayout, motions: Sequence[MotionData], gravity: float) -> list[np.ndarray]:
+    """Per motion, the lever of every harmonic and channel (K, C, 3), tilted-gravity term included."""
+    out = []
+    for m in motions:
+        om = 2 * math.pi * m.frequency_hz * np.asarray(m.k, float)
+        lift = np.zeros((om.size, 1, 3))
+        lift[:, 0, 2] = gravity / om**2 if gravity > 0 else 0.0
+        out.append(layout.position_m[None] + lift)
+    return out
+
+
+def _rows(U: np.ndarray, lever: np.ndarray) -> np.ndarray:
+    """Specific-force phasor vectors at every channel, (K, C, 3): p'' + alpha x lever."""
+    return U[:, None, :3] + np.cross(np.broadcast_to(U[:, None, 3:], lever.shape), lever)
+
+
+def _solve_motions(w: np.ndarray, Y: np.ndarray, lever: np.ndarray) -> np.ndarray:
+    """Plate motions (K, 6) given sensitivities w (C, 3): reading = w . a + alpha . (lever x w)."""
+    H = np.concatenate([np.broadcast_to(w, lever.shape), np.cross(lever, w[None])], axis=2)  # (K, C, 6)
+    return np.stack([np.linalg.lstsq(H[i], Y[i], rcond=None)[0] for i in range(Y.shape[0])])
+
+
+def _second_order(U: np.ndarray, m: MotionData, layout: AccelerometerLayout, axis: np.ndarray,
+                  terms: tuple[str, ...], gravity: float) -> np.ndarray:
+    if not terms:
+        return np.zeros((m.k.size, layout.num_channels), complex)
+    kmax = int(m.k.max())
+    dense = np.zeros((kmax, 6), complex)
+    dense[m.k - 1] = U
+    return second_order_phasors(dense, m.frequency_hz, layout.position_m, axis, terms, gravity)[m.k - 1]
+
+
+def _describe_direction(d: np.ndarray) -> str:
+    d = d * np.sign(d[np.argmax(np.abs(d))])
+    if abs(d[2]) > 0.7:
+        hint = "vertical acceleration there (a bounce or a tilt about x or y)"
+    else:
+        hint = "in-plane acceleration there (a translation along x or y, or a rotation about z)"
+    return f"[{d[0]:+.2f}, {d[1]:+.2f}, {d[2]:+.2f}]: record a motion with {hint}"
+
+
+def _fit(layout: AccelerometerLayout, motions: Sequence[MotionData], terms: tuple[str, ...], gravity: float
+         ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray, np.ndarray]:
+    """Sensitivities w (C, 3), motions [(K, 6)], residual RMS (C,), unobserved basis (3C, n)."""
+    C = layout.num_channels
+    levers = _levers(layout, motions, gravity)
+    w = layout.axis.copy()
+    Us = [_solve_motions(w, m.phasors, lv) for m, lv in zip(motions, levers)]
+    for _ in range(MAX_PASSES):
+        axis = w / np.linalg.norm(w, axis=1)[:, None]
+        Ss = [_second_order(U, m, layout, axis, terms, gravity) for U, m in zip(Us, motions)]
+        V = np.concatenate([_rows(U, lv) for U, lv in zip(Us, levers)], axis=0)  # (sum K, C, 3)
+        Yc = np.concatenate([m.phasors - S for m, S in zip(motions, Ss)], axis=0)  # (sum K, C)
+        w_new = np.empty_like(w)
+        for c in range(C):
+            A = np.concatenate([V[:, c].real, V[:, c].imag])
+            b = np.concatenate([Yc[:, c].real, Yc[:, c].imag])
+            w_new[c] = np.linalg.lstsq(A, b, rcond=None)[0]
+        scale = float(np.mean(np.linalg.norm(w_new, axis=1)))
+        w_new /= scale  # the common gain is unobservable: mean gain 1
+        change = float(np.linalg.norm(w_new - w) / np.linalg.norm(w))
+        w = w_new
+        Us = [_solve_motions(w, m.phasors - S, lv) for m, S, lv in zip(motions, Ss, levers)]
+        if change < PASS_TOLERANCE:
+            break
+    # Directions the data do not see are fixed by the least change from the nominal sensitivities
+    # (then mean gain 1 again): the data cannot tell them, so the nominal layout decides.
+    null = _null_space(layout, motions, w, Us, gravity)
+    if null.shape[1]:
+        d = (w - layout.axis).reshape(-1)
+        w = w - (null @ (null.T @ d)).reshape(w.shape)
+        w /= float(np.mean(np.linalg.norm(w, axis=1)))
+        axis = w / np.linalg.norm(w, axis=1)[:, None]
+        Ss = [_second_order(U, m, layout, axis, terms, gravity) for U, m in zip(Us, motions)]
+        Us = [_solve_motions(w, m.phasors - S, lv) for m, S, lv in zip(motions, Ss, levers)]
+    res = np.concatenate([
+        m.phasors - S - np.einsum("kcj,cj->kc", _rows(U, lv), w) for m, S, U, lv in zip(motions, Ss, Us, levers)
+    ])
+    rms = np.sqrt(np.mean(np.abs(res) ** 2, axis=0))
+    return w, Us, rms, null
+
+
+def _check_conditioning(layout: AccelerometerLayout, motions: Sequence[MotionData], gravity: float) -> None:
+    """Refuse when a channel's sensitivity is ill-conditioned under the nominal motions' estimate."""
+    levers = _levers(layout, motions, gravity)
+    Us = [_solve_motions(layout.axis, m.phasors, lv) for m, lv in zip(motions, levers)]
+    V = np.concatenate([_rows(U, lv) for U, lv in zip(Us, levers)], axis=0)
+    problems = []
+    for c, name in enumerate(layout.names):
+        A = np.concatenate([V[:, c].real, V[:, c].imag])
+        _, s, vt = np.linalg.svd(A, full_matrices=False)
+        cond = math.inf if s[-1] <= s[0] * 1e-12 else float(s[0] / s[-1])
+        if not cond <= MAX_CHANNEL_CONDITION:
+            problems.append(f"{name} (condition {cond:.3g}) lacks direction {_describe_direction(vt[-1])}")
+    if problems:
+        raise CalibrationError(
+            f"calibration is ill-conditioned with motions {[m.name for m in motions]}: "
+            + "; ".join(problems)
+        )
+
+
+def _misfit(layout: AccelerometerLayout, w: np.ndarray, m: MotionData, terms: tuple[str, ...], gravity: float
+            ) -> tuple[float, np.ndarray]:
+    """Misfit of one motion under sensitivities w: (total residual / reading, per channel (C,))."""
+    lv = _levers(layout, [m], gravity)[0]
+    axis = w / np.linalg.norm(w, axis=1)[:, None]
+    U = _solve_motions(w, m.phasors, lv)
+    for _ in range(3):
+        S = _second_order(U, m, layout, axis, terms, gravity)
+        U = _solve_motions(w, m.phasors - S, lv)
+    R = m.phasors - S - np.einsum("kcj,cj->kc", _rows(U, lv), w)
+    own = np.linalg.norm(m.phasors, axis=0)
+    total = float(np.linalg.norm(R) / np.linalg.norm(m.phasors))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per = np.where(own > 0, np.linalg.norm(R, axis=0) / own, 0.0)
+    return total, per
+
+
+def calibrate(layout: AccelerometerLayout, motions: Sequence[MotionData], *,
+              second_order_terms: Sequence[str] = SECOND_ORDER_TERMS, gravity_mps2: float = GRAVITY_MPS2,
+              cross_validate: bool = True) -> AccelCalibration:
+    """Fit every channel's gain and axis from several motions' readings (module docstring).
+
+    Raises :class:`CalibrationError` when the motions leave some channel's sensitivity
+    ill-conditioned, naming what to record.
+    """
+    terms = check_terms(second_order_terms)
+    motions = list(motions)
+    if len(motions) < 2:
+        raise CalibrationError(f"motions: need at least 2 recorded motions, got {len(motions)}")
+    for m in motions:
+        if np.shape(m.phasors) != (np.size(m.k), layout.num_channels) or not np.all(np.isfinite(m.phasors)):
+            raise ConfigError(
+                f"{m.name}: phasors must be finite, shape (K, {layout.num_channels}), got {np.shape(m.phasors)}"
+            )
+    _check_conditioning(layout, motions, gravity_mps2)
+    w, Us, rms, null = _fit(layout, motions, terms, gravity_mps2)
+    gain = np.linalg.norm(w, axis=1)
+    axis = w / gain[:, None]
+    # Uncertainty of w_c from its residual scatter (motions taken as known): cov = s^2 (A^T A)^-1.
+    levers = _levers(layout, motions, gravity_mps2)
+    V = np.concatenate([_rows(U, lv) for U, lv in zip(Us, levers)], axis=0)
+    n_rows = 2 * V.shape[0]
+    gain_std = np.empty(layout.num_channels)
+    axis_std = np.empty(layout.num_channels)
+    for c in range(layout.num_channels):
+        A = np.concatenate([V[:, c].real, V[:, c].imag])
+        s2 = rms[c] ** 2 / 2 * n_rows / max(n_rows - 3, 1)  # per real row: half the complex power
+        cov = s2 * np.linalg.inv(A.T @ A)
+        e = axis[c]
+        gain_std[c] = math.sqrt(max(e @ cov @ e, 0.0))
+        perp = cov - np.outer(cov @ e, e) - np.outer(e, e @ cov) + (e @ cov @ e) * np.outer(e, e)
+        axis_std[c] = math.degrees(math.sqrt(max(np.trace(perp), 0.0)) / gain[c])
+    unobservable = ["common gain of all channels (fixed: mean gain = 1)"]
+    if null.shape[1] > 1:
+        unobservable.append(
+            f"{null.shape[1] - 1} more combinations of the sensitivities (with the motions), of the form "
+            f"A w_c + B (l_c x w_c), that a coplanar array cannot see, e.g. a common tilt of the "
+            f"tangential axes out of the plate, which trades with alpha_z (fixed: least change from the "
+            f"nominal axes)"
+        )
+    report: dict[str, dict[str, float]] = {}
+    per_channel = []
+    if cross_validate and len(motions) >= 3:
+        for i, held in enumerate(motions):
+            rest = motions[:i] + motions[i + 1 :]
+            try:
+                _check_conditioning(layout, rest, gravity_mps2)
+            except CalibrationError:
+                report[held.name] = {"nominal": _misfit(layout, layout.axis, held, terms, gravity_mps2)[0],
+                                     "calibrated": math.nan}
+                continue
+            w_cv = _fit(layout, rest, terms, gravity_mps2)[0]
+            cal_total, cal_per = _misfit(layout, w_cv, held, terms, gravity_mps2)
+            report[held.name] = {"nominal": _misfit(layout, layout.axis, held, terms, gravity_mps2)[0],
+                                 "calibrated": cal_total}
+            per_channel.append(cal_per)
+    if per_channel:
+        misfit = np.median(np.array(per_channel), axis=0)
+    else:
+        misfit = np.median(np.array([_misfit(layout, w, m, terms, gravity_mps2)[1] for m in motions]), axis=0)
+    return AccelCalibration(layout.names, gain, axis, layout.axis.copy(), layout.position_m.copy(), gain_std,
+                            axis_std, misfit, tuple(m.name for m in motions), tuple(unobservable), report,
+                            unobserved_basis=null)
+
+
+def _null_space(layout: AccelerometerLayout, motions: Sequence[MotionData], w: np.ndarray,
+                Us: list[np.ndarray], gravity: float) -> np.ndarray:
+    """Orthonormal basis (3C, n) of the sensitivity parts of the directions the readings do not see.
+
+    The Jacobian of every reading with respect to all sensitivities and all motions (real and
+    imaginary parts) is taken at the fit; its null space, projected on the sensitivities.
+    """
+    levers = _levers(layout, motions, gravity)
+    C = layout.num_channels
+    n_u = sum(6 * m.k.size for m in motions)
+    blocks, col = [], 0
+    for m, U, lv in zip(motions, Us, levers):
+        V = _rows(U, lv)
+        K = m.k.size
+        Jw = np.zeros((K, C, C, 3), complex)
+        for c in range(C):
+            Jw[:, c, c] = V[:, c]
+        H = np.concatenate([np.broadcast_to(w, lv.shape), np.cross(lv, w[None])], axis=2)
+        Ju = np.zeros((K, C, n_u), complex)
+        for i in range(K):
+            Ju[i, :, col + 6 * i : col + 6 * i + 6] = H[i]
+        col += 6 * K
+        blocks.append(np.concatenate([Jw.reshape(K * C, 3 * C), Ju.reshape(K * C, n_u),
+                                      1j * Ju.reshape(K * C, n_u)], axis=1))
+    J = np.concatenate(blocks)
+    J = np.concatenate([J.real, J.imag])
+    norms = np.maximum(np.linalg.norm(J, axis=0), 1e-300)
+    _, s, vt = np.linalg.svd(J / norms, full_matrices=False)
+    null = vt[s < s[0] * NULL_TOLERANCE] / norms  # back to unscaled parameters
+    if null.size == 0:
+        return np.zeros((3 * C, 0))
+    q, r = np.linalg.qr(null[:, : 3 * C].T)
+    return q[:, np.abs(np.diag(r)) > 1e-12 * np.abs(r).max()]
+
+
+# ---------------------------------------------------------------------- store
+def calibration_path(cache_dir: str | Path, device_id: str) -> Path:
+    return Path(cache_dir).expanduser() / device_id / CALIBRATION_FILE
+
+
+def save_calibration(calibration: AccelCalibration, cache_dir: str | Path, device_id: str) -> Path:
+    """Write the device's calibration atomically; returns its path."""
+    path = calibration_path(cache_dir, device_id)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".calibration-", suffix=".json")
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        json.dump(calibration.to_dict(), fh, indent=1)
+    os.replace(tmp, path)
+    return path
+
+
+def load_calibration(cache_dir: str | Path, device_id: str) -> AccelCalibration | None:
+    """The device's stored calibration, or None when it has none."""
+    path = calibration_path(cache_dir, device_id)
+    if not path.exists():
+        return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: unreadable calibration: {exc}") from exc
+    return AccelCalibration.from_dict(data, str(path))
+
+
+__all__ = [
+    "AccelCalibration",
+    "CalibrationError",
+    "MotionData",
+    "calibrate",
+    "calibration_path",
+    "load_calibration",
+    "save_calibration",
+]

@@ -11,12 +11,15 @@ judges the extended suite against an independent fixed-step reference instead
 side) on s' = -mu n w/|w|, period after period until the period average changes by less than
 1e-8 m/s or 200 periods, on a fixed random subset of valid configurations; ratios compare the same
 configurations at equal or better error. --stalls measures the per-call latency of small calls
-with a bounded busy loop on the other core.
+with a bounded busy loop on the other core. --design times one-frequency field designs (line sink
+and rotation) at the given sample grids: wall and CPU seconds, solver calls, configurations solved
+and mean periods per configuration.
 
 examples:
   ppod bench solver --quick
   ppod bench solver --stalls
   ppod bench solver --suite --json out/bench/suite.json
+  ppod bench solver --design 7 15
   ppod bench solver --out out/bench
   ppod bench solver --baseline-configs 10 --motions Sink LineSinkX
 """
@@ -62,6 +65,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference-configs", type=int, default=12, metavar="N",
                         help="configurations per motion checked against the fixed-step reference (default 12)")
     parser.add_argument("--json", metavar="OUT", help="with --suite: also write the figures as JSON")
+    parser.add_argument("--design", type=int, nargs="+", metavar="N",
+                        help="only the design section: line sink and rotation designs on N x N sample grids "
+                             "(the design's default is 7)")
     parser.add_argument("--no-busy", dest="busy", action="store_false",
                         help="latency section without the busy loop on the other core")
 
@@ -227,6 +233,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_stalls(args, out)
     if args.suite:
         return _run_suite(args, out)
+    if args.design:
+        return _run_design(args, out)
     quick = args.quick
     n = 21 if quick else args.grid
     nr = 5 if quick else args.rigid_grid
@@ -452,6 +460,56 @@ def _run_suite(args, out: Path) -> int:
     if args.json:
         payload = {"grid": n, "load_average": list(load), "motions": figures}
         Path(args.json).write_text(json.dumps(payload, indent=1) + "\n", encoding="utf-8")
+    return 0
+
+
+DESIGN_SPECS = [("line_sink", [0.01, 0.0, 0.5, 0.3]), ("rotation", [0.02, 0.01, 0.2])]
+
+
+def _run_design(args, out: Path) -> int:
+    """One-frequency designs from an empty design cache on N x N sample grids (design._FIT_N)."""
+    import os
+
+    import ppod_ros.physics as physics
+    from ppod_ros.planning import FieldSpec
+    from ppod_ros.planning import design as design_module
+
+    real = physics.solve_fields
+    calls: list = []
+
+    def counting(*a, **kw):
+        r = real(*a, **kw)
+        calls.append(r)
+        return r
+
+    default_n = design_module._FIT_N
+    design_module.design_field(FieldSpec.from_request("transport", [0.003, 0.0]))  # solver loading
+    rows = []
+    physics.solve_fields = counting
+    try:
+        for n in args.design:
+            design_module._FIT_N = n
+            for kind, params in DESIGN_SPECS:
+                design_module._CACHE.clear()
+                calls.clear()
+                load = os.getloadavg()[0]
+                t0, c0 = time.perf_counter(), time.process_time()
+                r = design_module.design_field(FieldSpec.from_request(kind, params))
+                wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+                configs = sum(int(c.periods.size) for c in calls)
+                integrated = sum(int((c.periods > 0).sum()) for c in calls)
+                periods = sum(float(c.periods.sum()) for c in calls) / max(1, integrated)
+                rows.append([kind, f"{n} x {n} ({len(design_module._disc_points(n))})", f"{r.r2:.4f}",
+                             f"{wall:.2f}", f"{cpu:.2f}", str(len(calls)), str(configs), f"{periods:.2f}",
+                             f"{load:.1f}"])
+                print("  " + "  ".join(rows[-1]), flush=True)
+    finally:
+        physics.solve_fields = real
+        design_module._FIT_N = default_n
+    text = _table("one-frequency designs (30 Hz, point part mu 0.3), from an empty design cache",
+                  ["design", "samples (points)", "R^2", "wall s", "CPU s", "solver calls", "configs",
+                   "periods/config", "load"], rows)
+    (out / "solver_design.txt").write_text(text + "\n", encoding="utf-8")
     return 0
 
 

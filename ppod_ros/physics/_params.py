@@ -109,6 +109,11 @@ def ensure_compiled(*kernels: tuple[str, int, bool]) -> float:
         return spent
 
 
+def is_loaded(kernel: tuple[str, int, bool]) -> bool:
+    """Whether ``kernel`` (family, part kind, parallel) is compiled or loaded in this process."""
+    return kernel in _warmed
+
+
 def _drop_stale_cache() -> None:
     """Delete numba's cached machine code of this package when any kernel source changed.
 

@@ -22,6 +22,11 @@ import numba
 
 #: Expected serial time (s) above which a call runs in parallel.
 PARALLEL_MIN_SECONDS = 0.03
+#: Extra expected serial time (s) a call must reach to go parallel while the parallel kernel is not
+#: loaded yet in this process: loading it and starting numba's threading layer costs about 0.1 s of
+#: CPU once (measured for the point field kernel), more than a 21 x 21 grid's whole serial solve,
+#: so a short-lived process (``ppod field``) with a small grid never pays it.
+PARALLEL_LOAD_S = 0.15
 #: Starting per-unit costs (s) before anything was measured: a point / rigid configuration of the
 #: field solver, a point / rigid part per period of full dynamics.
 SEED_COST_S = {"field0": 2e-4, "field1": 3e-3, "dyn0": 2e-5, "dyn1": 2e-4}
@@ -32,11 +37,12 @@ _lock = threading.Lock()
 _cost = dict(SEED_COST_S)
 
 
-def plan(kind: str, units: float, threads: int | None) -> int:
+def plan(kind: str, units: float, threads: int | None, parallel_ready: bool = True) -> int:
     """Threads to use for ``units`` of work of ``kind`` (1: run the serial kernel).
 
     ``threads`` is the caller's setting (None: choose by size; 1: always serial; n > 1: parallel on
-    up to n threads when the work is large enough to pay for the wake-up).
+    up to n threads when the work is large enough to pay for the wake-up). ``parallel_ready``:
+    whether the parallel kernel is already loaded (if not, ``PARALLEL_LOAD_S`` more is needed).
     """
     avail = int(numba.config.NUMBA_NUM_THREADS)
     want = avail if threads is None else min(int(threads), avail)
@@ -44,7 +50,8 @@ def plan(kind: str, units: float, threads: int | None) -> int:
         return 1
     with _lock:
         expected = units * _cost[kind]
-    return want if expected >= PARALLEL_MIN_SECONDS else 1
+    need = PARALLEL_MIN_SECONDS + (0.0 if parallel_ready else PARALLEL_LOAD_S)
+    return want if expected >= need else 1
 
 
 def learn(kind: str, units: float, seconds: float, nthreads: int) -> None:
@@ -70,4 +77,4 @@ def thread_count(nthreads: int) -> Iterator[None]:
         numba.set_num_threads(old)
 
 
-__all__ = ["PARALLEL_MIN_SECONDS", "SEED_COST_S", "learn", "plan", "thread_count"]
+__all__ = ["PARALLEL_LOAD_S", "PARALLEL_MIN_SECONDS", "SEED_COST_S", "learn", "plan", "thread_count"]

@@ -28,7 +28,7 @@ from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import _layout as lay
 from ppod_ros.physics import _threads
-from ppod_ros.physics._params import check_configs, check_part, ensure_compiled, point_rows, rigid_rows
+from ppod_ros.physics._params import check_configs, check_part, ensure_compiled, is_loaded, point_rows, rigid_rows
 from ppod_ros.physics._rk import INTEGRATORS
 from ppod_ros.physics._solve import solve_motions, solve_motions_serial
 from ppod_ros.physics.plate import TABLE_COLS, motion_table, table_kmax
@@ -488,7 +488,7 @@ def _run(motions, part, cfg, X0, R0, has, settings, progress):
     out_f = np.full((M, n), np.nan)
     out_r = np.ones((M, n))
     cost_kind = f"field{kind}"
-    nthreads = _threads.plan(cost_kind, M * n, settings.threads)
+    nthreads = _threads.plan(cost_kind, M * n, settings.threads, is_loaded(("field", kind, True)))
     kernel = solve_motions if nthreads > 1 else solve_motions_serial
     setup = ensure_compiled(("field", kind, nthreads > 1))
     t0 = time.perf_counter()

@@ -64,6 +64,15 @@ def test_small_calls_plan_serial_and_large_ones_parallel_by_learnt_cost(monkeypa
     assert _threads.plan("dyn0", 10, None) == 2
 
 
+def test_a_process_without_the_parallel_kernel_loads_it_only_for_larger_work(monkeypatch):
+    monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
+    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    units = 441  # ppod field's default 21 x 21 grid: about 0.09 s expected serially
+    assert _threads.plan("field0", units, None, parallel_ready=True) == 2
+    assert _threads.plan("field0", units, None, parallel_ready=False) == 1
+    assert _threads.plan("field0", 100_000, None, parallel_ready=False) == 2
+
+
 def test_solve_fields_matches_solve_field_per_motion_with_shared_and_per_motion_configs(point_part):
     motions = [suite_motion("LineSinkX"), suite_motion("Sink"), suite_motion("Swirl3H")]
     cfg = grid_configs(np.linspace(-0.06, 0.06, 4), np.linspace(-0.06, 0.06, 3))

@@ -59,22 +59,32 @@ class MpcSettings:
 
     replan_period_s: float = 0.5          # device time between replanning steps (>= 2 Hz)
     horizon_s: float = 1.0                # prediction horizon
+    ramp_s: float = 0.5                   # the generator's ramp on a switch (device default_ramp_s)
+    approach_per_s: float = 0.8           # waypoint: this fraction of the error per horizon second
     frequency_hz: float = DEFAULT_FREQUENCY_HZ  # of the searched motions
     harmonics: int = 1                    # 1: 11 real inputs; 2: 23
     headroom: float = 0.15                # fraction under every device limit
     max_speed_mps: float = 0.012          # waypoint distance per horizon second
     max_turn_radps: float = 0.5           # angular waypoint per horizon second
-    angle_weight_m_per_rad: float = 0.01  # an angle error of 1 rad costs as much as 10 mm
+    angle_weight_m_per_rad: float = 0.03  # an angle error of 1 rad costs as much as 30 mm
     hold_weight: float = 3.0              # parts within tolerance: weight of staying put
+    hold_release: float = 1.5             # ... until out by this many tolerances (hysteresis)
     clearance_m: float = 0.002            # predicted footprints closer than this are penalised
     collision_weight: float = 5.0
     gauss_newton_steps: int = 2
     fd_step: float = 0.03                 # finite-difference step, relative to the axis scales
     max_change: float = 0.6               # trust region per step, relative to the axis scales
-    switch_gain: float = 0.05             # a new motion must lower the cost by this fraction
+    min_amplitude: float = 0.8            # searched motions keep at least this fraction of the template
+                                          # sink's amplitude (relative to the axis scales): weak motions
+                                          # let parts of unknown, higher friction stick
+    min_dwell_s: float = 1.0              # at least this long between switches (except to stop the plate):
+                                          # each new motion starts with the feedback's first error
+    near_m: float = 0.004                 # every moving part this close: the endgame
+    near_dwell_s: float = 2.0             # ... where switches wait longer (the first error decays)
+    switch_gain: float = 0.2              # a new motion must lower the cost by this fraction
     scale_gain: float = 0.4               # smoothing of the velocity-scale estimate per step
-    scale_range: tuple[float, float] = (0.3, 3.0)
-    min_predicted_m: float = 3e-4         # displacements shorter than this teach nothing
+    scale_range: tuple[float, float] = (0.4, 2.5)
+    min_predicted_m: float = 1e-3         # predicted displacements shorter than this teach nothing
     settle_s: float = 0.5                 # within tolerance for this long: reached
     lost_after_s: float = 2.0             # a commanded part unseen this long: failed
     template_sink_gain_per_s: float = 0.3
@@ -244,6 +254,7 @@ def template_motion(kind: str, planner: MultiTask, goal: PartGoal, pose: np.ndar
 # ---------------------------------------------------------------------------------- the planner
 @dataclass
 class _Tracked:
+    holding: bool = False
     in_tol_since: float | None = None
     time_to_goal_s: float | None = None
     scale: float = 1.0
@@ -255,7 +266,18 @@ class _Segment:
     t_s: float
     poses: np.ndarray            # (N, 3) at the start of the segment
     velocity: np.ndarray         # (G, 3) model velocity (unscaled) per goal at the start
+    previous: np.ndarray         # (G, 3) the same under the motion before the switch
     motion_key: bytes = b""
+
+
+def ramped_displacement(v_old: np.ndarray, v_new: np.ndarray, t_s: float, ramp_s: float) -> np.ndarray:
+    """Displacement over ``t_s`` after a switch from v_old to v_new, the velocity crossfaded
+    linearly over ``ramp_s`` (the generator's ramp)."""
+    if ramp_s <= 0:
+        return v_new * t_s
+    if t_s >= ramp_s:
+        return v_old * (0.5 * ramp_s) + v_new * (t_s - 0.5 * ramp_s)
+    return v_old * t_s + (v_new - v_old) * (t_s * t_s / (2.0 * ramp_s))
 
 
 class MultiTask:
@@ -287,6 +309,7 @@ class MultiTask:
         self.state = {g.index: _Tracked() for g in self.goals}
         self.t0: float | None = None
         self.t_plan = -math.inf
+        self.t_switch = -math.inf
         self.current = PlateMotion.zero(self.settings.frequency_hz)
         self.segment: _Segment | None = None
         self.finished: MultiStep | None = None
@@ -370,8 +393,9 @@ class MultiTask:
         if seg is None or seg.motion_key != self.current.key:
             return
         dt = t_s - seg.t_s
+        disp = ramped_displacement(seg.previous, seg.velocity, dt, self.settings.ramp_s)
         for k, g in enumerate(self.goals):
-            pred = seg.velocity[k, :2] * dt
+            pred = disp[k, :2]
             d = poses[g.index, :2] - seg.poses[g.index, :2]
             n2 = float(pred @ pred)
             if not np.all(np.isfinite(d)) or n2 < s.min_predicted_m ** 2:
@@ -387,8 +411,14 @@ class MultiTask:
             # Every commanded part is there: stop the plate (at rest, it holds every part).
             self.phase = "holding"
             target = PlateMotion.zero(self.current.frequency_hz, name="rest")
+            self._v_current = np.zeros((len(self.goals), 3))
+            _c, self._v_current = self._costs([self.current], poses, statuses)
+            self._v_current = self._v_current[0]
             return self._switch(t_s, poses, target, np.zeros((len(self.goals), 3)))
         self.phase = "moving"
+        self._v_current = np.zeros((len(self.goals), 3))
+        _c, v_cur = self._costs([self.current], poses, statuses)
+        self._v_current = v_cur[0]
         current_cost, current_vel = self._costs([self.current], poses, statuses)
         candidates = [PlateMotion.zero(s.frequency_hz, name="rest")]
         for g in self.goals:
@@ -411,7 +441,9 @@ class MultiTask:
         final_cost, final_vel = self._costs([best_motion], poses, statuses)
         if not math.isfinite(float(final_cost[0])):
             return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
-        if float(final_cost[0]) < (1.0 - s.switch_gain) * float(current_cost[0]):
+        near = all(st.position_error_m <= s.near_m for st in statuses)
+        dwelt = t_s - self.t_switch >= (s.near_dwell_s if near else s.min_dwell_s) - 1e-9
+        if dwelt and float(final_cost[0]) < (1.0 - s.switch_gain) * float(current_cost[0]):
             return self._switch(t_s, poses, best_motion, final_vel[0])
         return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
 
@@ -419,11 +451,14 @@ class MultiTask:
         changed = motion.key != self.current.key
         if changed:
             self.switches += 1
+            self.t_switch = t_s
         self.current = motion
-        self.segment = _Segment(t_s, poses.copy(), np.nan_to_num(velocity), motion.key)
+        previous = np.nan_to_num(velocity) if keep else self._v_current
+        self.segment = _Segment(t_s, poses.copy(), np.nan_to_num(velocity), previous, motion.key)
         scales = np.array([self.state[g.index].scale for g in self.goals])
-        self.last_prediction = {"t_s": t_s, "motion": motion, "poses": poses.copy(),
-                                "velocity": np.nan_to_num(velocity) * scales[:, None]}
+        self.last_prediction = {"t_s": t_s, "motion": motion, "poses": poses.copy(), "switched": changed,
+                                "velocity": np.nan_to_num(velocity) * scales[:, None],
+                                "previous": previous * scales[:, None], "ramp_s": self.settings.ramp_s}
         return motion if changed else None
 
     def _waypoints(self, poses: np.ndarray, statuses: list[PartStatus]) -> tuple[np.ndarray, np.ndarray]:
@@ -435,14 +470,20 @@ class MultiTask:
             p = poses[g.index]
             e = np.array([g.x_m - p[0], g.y_m - p[1]])
             d = float(np.hypot(*e))
-            step = min(1.0, s.max_speed_mps * H / d) if d > 0 else 0.0
+            step = min(1.0, s.approach_per_s * H, s.max_speed_mps * H / d) if d > 0 else 0.0
             way[k, :2] = p[:2] + step * e
             if g.theta_rad is not None:
                 a = -float(_wrap(p[2] - g.theta_rad, self.symmetry[g.index]))
-                way[k, 2] = p[2] + float(np.clip(a, -s.max_turn_radps * H, s.max_turn_radps * H))
+                lim = min(s.max_turn_radps * H, s.approach_per_s * H * abs(a))
+                way[k, 2] = p[2] + float(np.clip(a, -lim, lim))
             else:
                 way[k, 2] = p[2]
-            if st.within:
+            tr = self.state[g.index]
+            out = st.position_error_m > s.hold_release * g.position_tol_m or (
+                st.angle_error_rad is not None and abs(st.angle_error_rad) > s.hold_release * g.angle_tol_rad)
+            tr.holding = st.within or (tr.holding and not out)
+            if tr.holding:
+                way[k] = p
                 weight[k] = s.hold_weight
         return way, weight
 
@@ -472,7 +513,10 @@ class MultiTask:
         scales = np.array([self.state[g.index].scale for g in self.goals])
         way, weight = self._waypoints(poses, statuses)
         cur = np.array([poses[g.index] for g in self.goals])
-        pred = cur[None] + H * scales[None, :, None] * vel                   # (M, G, 3)
+        v_cur = getattr(self, "_v_current", None)
+        v_cur = np.zeros((G, 3)) if v_cur is None else v_cur
+        r = min(s.ramp_s, H)
+        pred = cur[None] + scales[None, :, None] * (v_cur[None] * (0.5 * r) + vel * (H - 0.5 * r))  # (M, G, 3)
         res_xy = (pred[..., :2] - way[None, :, :2]) * weight[None, :, None]
         oriented = np.array([g.theta_rad is not None for g in self.goals], float)
         res_th = (pred[..., 2] - way[None, :, 2]) * s.angle_weight_m_per_rad * oriented[None] * weight[None]
@@ -514,7 +558,14 @@ class MultiTask:
             norm = float(np.linalg.norm(dv))
             if norm > s.max_change:
                 dv *= s.max_change / norm
-            trials = [_to_motion(v + a * dv, freq, harmonics, name="mpc") for a in (1.0, 0.5, 0.25)]
+            floor = s.min_amplitude * float(np.linalg.norm(_to_vector(self._base("sink"), 1)))
+            trials = []
+            for a in (1.0, 0.5, 0.25):
+                vt = v + a * dv
+                norm_t = float(np.linalg.norm(vt))
+                if 0 < norm_t < floor:
+                    vt = vt * (floor / norm_t)
+                trials.append(_to_motion(vt, freq, harmonics, name="mpc"))
             trials = [fit_envelope(m, self.device, s.headroom)[0] for m in trials]
             costs, _ = self._costs(trials, poses, statuses)
             j = int(np.argmin(costs))

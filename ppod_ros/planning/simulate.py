@@ -49,6 +49,9 @@ class PlantError:
         ph = np.radians(rng.uniform(-phase_deg, phase_deg, 6))
         C = rng.uniform(-coupling, coupling, (6, 6))
         np.fill_diagonal(C, 0.0)
+        # Coupling relative to each axis's typical scale (m/s^2 and rad/s^2 differ by 10x).
+        scale = np.array([10.0, 10.0, 10.0, 100.0, 100.0, 100.0])
+        C = C * scale[:, None] / scale[None, :]
         return cls(np.diag(g * np.exp(1j * ph)) - np.eye(6) + C, **kwargs)
 
     def played(self, motion, since_switch_s: float, goal_number: int):
@@ -133,7 +136,7 @@ def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | Rig
                 played = _blend(previous, motion, min(1.0, (since + 0.5 * dt_s) / ramp_s))
             if plant is not None:
                 played = plant.played(played, since, motions)
-            if played is not None and not played.is_zero():
+            if played is not None:
                 state = dyn.advance(played, t, dt_s)
                 for i in np.flatnonzero(state.status != 0):
                     dyn.set_part(int(i), state.configurations[i])

@@ -379,7 +379,7 @@ class MultiTask:
             if within:
                 if st.in_tol_since is None:
                     st.in_tol_since = t_s
-                    st.time_to_goal_s = t_s - (self.t0 or t_s)
+                    st.time_to_goal_s = t_s - self.t0
             else:
                 st.in_tol_since, st.time_to_goal_s = None, None
             reached = within and t_s - st.in_tol_since >= self.settings.settle_s

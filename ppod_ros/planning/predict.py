@@ -8,7 +8,8 @@ loops the existing :func:`ppod_ros.physics.solve_field`, one call per motion, on
 thread: the planner's calls are small (a few configurations), where a parallel call costs more
 in thread start-up and stalls than it saves.
 
-The planner's solver settings (:data:`PLANNER_SOLVER`) are the ``fast`` preset without the
+The planner's solver settings (:data:`PLANNER_SOLVER`) are the ``fast`` preset, capped at 40 periods and
+5000 steps per period (a stick-slip candidate is given up on, not integrated for seconds), without the
 result cache (every candidate is new) on one thread.
 """
 
@@ -24,7 +25,8 @@ from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import PRESETS, SolverSettings, solve_field
 
 #: Solver settings of the planner's small calls: the fast preset, no cache, one thread.
-PLANNER_SOLVER: SolverSettings = PRESETS["fast"].replace(cache=False, threads=1)
+PLANNER_SOLVER: SolverSettings = PRESETS["fast"].replace(cache=False, threads=1, max_periods=40,
+                                                         max_steps_per_period=5000)
 
 
 def predict_velocities(motions: Sequence[PlateMotion], part: PointPart | RigidPart, configs,

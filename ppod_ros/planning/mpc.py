@@ -208,6 +208,20 @@ def _to_motion(v: np.ndarray, frequency_hz: float, harmonics: int, name: str = "
     return PlateMotion.from_phasors(frequency_hz, np.arange(1, harmonics + 1), table, name=name)
 
 
+def base_design(kind: str, device, settings: MpcSettings | None = None) -> PlateMotion:
+    """The template sink or rotation designed at the plate centre (cached by design_field: call
+    it once at start-up, e.g. when a node configures, so the first replanning step does not pay
+    the design, about a second each)."""
+    s = settings or MpcSettings()
+    if kind == "sink":
+        spec = FieldSpec.from_request("sink", [0.0, 0.0, s.template_sink_gain_per_s])
+    elif kind == "rotation":
+        spec = FieldSpec.from_request("rotation", [0.0, 0.0, s.template_turn_radps])
+    else:
+        raise ConfigError(f"kind: expected 'sink' or 'rotation', got {kind!r}")
+    return design_field(spec, device=device).motion
+
+
 # The template fields, by kind: one table (an unknown kind raises). Each builds a motion from
 # (planner, goal, pose); the designs are made once at the centre and moved with exact shifts.
 def _template_sink(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion:
@@ -322,12 +336,7 @@ class MultiTask:
     # ------------------------------------------------------------------ templates
     def _base(self, kind: str) -> PlateMotion:
         if kind not in self._bases:
-            s = self.settings
-            if kind == "sink":
-                spec = FieldSpec.from_request("sink", [0.0, 0.0, s.template_sink_gain_per_s])
-            else:
-                spec = FieldSpec.from_request("rotation", [0.0, 0.0, s.template_turn_radps])
-            self._bases[kind] = design_field(spec, device=self.device).motion
+            self._bases[kind] = base_design(kind, self.device, self.settings)
         return self._bases[kind]
 
     # ------------------------------------------------------------------ stepping
@@ -605,5 +614,5 @@ class MultiTask:
         return self.finished
 
 
-__all__ = ["TEMPLATES", "MpcSettings", "MultiStep", "MultiTask", "PartGoal", "PartStatus", "check_goals",
-           "part_radius_m", "template_motion"]
+__all__ = ["TEMPLATES", "MpcSettings", "MultiStep", "MultiTask", "PartGoal", "PartStatus", "base_design",
+           "check_goals", "part_radius_m", "ramped_displacement", "template_motion"]

@@ -30,6 +30,7 @@ SUBCOMMANDS: dict[str, str] = {
     "record": "record",
     "replay": "replay",
     "bench": "bench",
+    "move": "move",
 }
 
 EPILOG = """examples:

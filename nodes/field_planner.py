@@ -104,6 +104,27 @@ def part_goals_from_request(goal, ids: list[int], default_tol_m: float, default_
     return out
 
 
+#: A lost track is taken over by a new one of the same label within this distance (m): touching
+#: parts are lost by the tracker and come back under new ids.
+REASSOCIATE_M = 0.02
+
+
+def reassociate(ids: list[int], labels: list, last_xy: list, by_id: dict) -> None:
+    """Rows whose track is gone take over the nearest new track (an id in no row) of the same
+    label within REASSOCIATE_M of where the row was last seen (in place)."""
+    taken = set(ids)
+    for row, pid in enumerate(ids):
+        if pid in by_id or last_xy[row] is None:
+            continue
+        x, y = last_xy[row]
+        near = [(math.hypot(p.pose.x - x, p.pose.y - y), nid) for nid, p in by_id.items()
+                if nid not in taken and p.label == labels[row]]
+        near = [c for c in near if c[0] <= REASSOCIATE_M]
+        if near:
+            ids[row] = min(near)[1]
+            taken.add(ids[row])
+
+
 class _RunningTask:
     """The MovePart goal being executed: its handle, the Task, the track ids in Task order."""
 
@@ -117,6 +138,8 @@ class _RunningTask:
         self.last_motion_key = None
         self.last_step = None
         self.multi = isinstance(task, MultiTask)
+        self.labels: list[str | None] = [None] * len(ids)   # per row, as last seen
+        self.last_xy: list[tuple[float, float] | None] = [None] * len(ids)
 
 
 class FieldPlannerNode(PpodLifecycleNode):
@@ -381,11 +404,15 @@ class FieldPlannerNode(PpodLifecycleNode):
             return
         parts = self._poses.parts if self._poses is not None else []
         by_id = {int(p.id): p for p in parts if p.status != PartPose.STATUS_LOST}
+        if run.multi:
+            reassociate(run.ids, run.labels, run.last_xy, by_id)
         poses = np.full((len(run.ids), 3), np.nan)
         for row, pid in enumerate(run.ids):
             p = by_id.get(pid)
             if p is not None:
                 poses[row] = (p.pose.x, p.pose.y, p.pose.theta)
+                run.last_xy[row] = (p.pose.x, p.pose.y)
+                run.labels[row] = p.label
         t0 = time.perf_counter()
         try:
             step = run.task.step(t_s, poses)

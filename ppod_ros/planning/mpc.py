@@ -86,7 +86,8 @@ class MpcSettings:
     scale_range: tuple[float, float] = (0.4, 2.5)
     min_predicted_m: float = 1e-3         # predicted displacements shorter than this teach nothing
     settle_s: float = 0.5                 # within tolerance for this long: reached
-    lost_after_s: float = 2.0             # a commanded part unseen this long: failed
+    lost_after_s: float = 6.0             # a commanded part unseen this long: failed (touching parts
+                                          # are lost by the tracker for a while)
     template_sink_gain_per_s: float = 0.3
     template_turn_radps: float = 0.3
 
@@ -329,6 +330,8 @@ class MultiTask:
         self.finished: MultiStep | None = None
         self.phase = "planning"
         self.plan_times_ms: list[float] = []
+        self.last_pose: dict[int, np.ndarray] = {}
+        self.unseen: set[int] = set()
         self.switches = 0
         self.last_prediction: dict | None = None   # {"t_s", "motion", "poses", "velocity" (G, 3) scaled}
         self._bases: dict[str, PlateMotion] = {}
@@ -363,8 +366,17 @@ class MultiTask:
             return self._end(statuses, f"timeout after {elapsed:.1f} s: {n_ok} of {len(statuses)} parts reached")
         motion, plan_ms = None, 0.0
         if t_s - self.t_plan >= self.settings.replan_period_s - 1e-9:
-            seen = np.all(np.isfinite(poses[[g.index for g in self.goals], :2]), axis=1)
-            if seen.all():
+            rows = [g.index for g in self.goals]
+            seen = np.all(np.isfinite(poses[rows, :2]), axis=1)
+            for row, ok in zip(rows, seen):
+                if ok:
+                    self.last_pose[row] = poses[row]
+            if seen.any() and all(row in self.last_pose for row in rows):
+                # An unseen commanded part is planned at its last pose with no weight (not steered).
+                self.unseen = {row for row, ok in zip(rows, seen) if not ok}
+                poses = poses.copy()
+                for row in self.unseen:
+                    poses[row] = self.last_pose[row]
                 w0 = time.perf_counter()
                 self._estimate(t_s, poses)
                 motion = self._plan(t_s, poses, statuses)
@@ -404,6 +416,8 @@ class MultiTask:
         dt = t_s - seg.t_s
         disp = ramped_displacement(seg.previous, seg.velocity, dt, self.settings.ramp_s)
         for k, g in enumerate(self.goals):
+            if g.index in self.unseen:
+                continue
             pred = disp[k, :2]
             d = poses[g.index, :2] - seg.poses[g.index, :2]
             n2 = float(pred @ pred)
@@ -494,6 +508,8 @@ class MultiTask:
             if tr.holding:
                 way[k] = p
                 weight[k] = s.hold_weight
+            if g.index in self.unseen:
+                weight[k] = 0.0
         return way, weight
 
     def _costs(self, motions: Sequence[PlateMotion], poses: np.ndarray, statuses: list[PartStatus]

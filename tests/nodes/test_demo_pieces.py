@@ -111,3 +111,18 @@ def test_goals_are_not_combined_with_part_or_goal():
     with pytest.raises(ConfigError, match="--timeout"):
         demo.run(args)
     assert parser.parse_args([]).goals is None
+
+
+def test_the_planner_node_gives_a_lost_track_to_a_new_one_of_the_same_label_nearby():
+    from types import SimpleNamespace
+
+    from ppod_nodes.field_planner import reassociate
+
+    def pose(label, x, y):
+        return SimpleNamespace(label=label, pose=SimpleNamespace(x=x, y=y))
+
+    ids, labels, last = [4, 1, 3], ["bracket", "washer", "washer"], [(0.02, 0.0), (0.0, 0.0), (0.03, 0.03)]
+    by_id = {4: pose("bracket", 0.02, 0.0), 6: pose("washer", 0.031, 0.029), 7: pose("tile", 0.0, 0.001),
+             8: pose("washer", 0.06, 0.0)}
+    reassociate(ids, labels, last, by_id)
+    assert ids == [4, 1, 6]  # row 1: no washer within 20 mm (the tile does not count); row 2: track 6

@@ -156,3 +156,15 @@ def test_predict_uses_the_batched_solver_when_present(monkeypatch):
     assert calls == [2] and np.all(v2 == 1.0)
     with pytest.raises(ConfigError, match="configs"):
         predict.predict_velocities(motions, PointPart(0.3), np.zeros((2, 3)))
+
+
+def test_an_unseen_commanded_part_is_not_steered_and_the_others_are_still_planned():
+    parts = [PointPart(0.3), PointPart(0.3)]
+    task = MultiTask(parts, [PartGoal(0, 0.0, 0.0), PartGoal(1, 0.03, 0.03)], timeout_s=30.0)
+    first = task.step(0.0, [[0.04, -0.02, 0.0], [-0.04, 0.03, 0.0]])
+    assert first.motion is not None  # planned with both seen
+    step = task.step(1.0, [[0.039, -0.02, 0.0], [math.nan] * 3])  # part 1 lost by the tracker
+    assert not step.failed_reason and task.unseen == {1}
+    assert step.plan_ms > 0  # replanned for the part still seen
+    step = task.step(7.5, [[0.03, -0.01, 0.0], [math.nan] * 3])
+    assert step.failed_reason and "part 1 not seen" in step.failed_reason

@@ -52,6 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--goals", type=Path, metavar="GOALS.yaml",
                         help="several parts to their own goals at once (docs/planner.md); default without "
                              "--part/--goal: the bracket and the two washers of the default scene")
+    parser.add_argument("--keep-clear", action="store_true",
+                        help="with several goals: also keep the predicted paths clear of the parts not commanded")
     parser.add_argument("--part", default=None,
                         help="one part with MovePart: a scene label (first match) or index (default: bracket)")
     parser.add_argument("--goal", nargs="+", type=float, default=None, metavar="V",

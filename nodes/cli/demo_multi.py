@@ -138,7 +138,8 @@ class MultiDemo(_Demo):
         client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
         if not client.wait_for_server(timeout_sec=30):
             raise DeviceError("the field_planner's MoveParts action is not available")
-        goal = MoveParts.Goal(part_ids=ids, timeout_s=float(self.args.timeout))
+        goal = MoveParts.Goal(part_ids=ids, timeout_s=float(self.args.timeout),
+                              keep_others_clear=bool(getattr(self.args, "keep_clear", False)))
         for g in self.goals:
             goal.targets.append(Pose2D(x=float(g["x"]), y=float(g["y"]), theta=float(g["theta_rad"] or 0.0)))
             goal.use_orientation.append(g["theta_rad"] is not None)

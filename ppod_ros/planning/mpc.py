@@ -64,11 +64,13 @@ class MpcSettings:
     frequency_hz: float = DEFAULT_FREQUENCY_HZ  # of the searched motions
     harmonics: int = 1                    # 1: 11 real inputs; 2: 23
     headroom: float = 0.15                # fraction under every device limit
-    max_speed_mps: float = 0.012          # waypoint distance per horizon second
+    max_speed_mps: float = 0.008          # waypoint distance per horizon second
     max_turn_radps: float = 0.5           # angular waypoint per horizon second
     angle_weight_m_per_rad: float = 0.03  # an angle error of 1 rad costs as much as 30 mm
     hold_weight: float = 3.0              # parts within tolerance: weight of staying put
     hold_release: float = 1.5             # ... until out by this many tolerances (hysteresis)
+    region_radius_m: float = 0.065        # predicted positions beyond this (and beyond the part's own) rule
+                                          # a candidate out: parts are never driven off the working disc
     clearance_m: float = 0.002            # predicted footprints closer than this are penalised
     collision_weight: float = 5.0
     gauss_newton_steps: int = 2
@@ -82,8 +84,8 @@ class MpcSettings:
     near_m: float = 0.004                 # every moving part this close: the endgame
     near_dwell_s: float = 2.0             # ... where switches wait longer (the first error decays)
     switch_gain: float = 0.2              # a new motion must lower the cost by this fraction
-    scale_gain: float = 0.4               # smoothing of the velocity-scale estimate per step
-    scale_range: tuple[float, float] = (0.4, 2.5)
+    scale_gain: float = 0.6               # smoothing of the velocity-scale estimate per step
+    scale_range: tuple[float, float] = (0.4, 4.0)
     min_predicted_m: float = 1e-3         # predicted displacements shorter than this teach nothing
     settle_s: float = 0.5                 # within tolerance for this long: reached
     lost_after_s: float = 6.0             # a commanded part unseen this long: failed (touching parts
@@ -283,6 +285,7 @@ class _Segment:
     velocity: np.ndarray         # (G, 3) model velocity (unscaled) per goal at the start
     previous: np.ndarray         # (G, 3) the same under the motion before the switch
     motion_key: bytes = b""
+    unseen: frozenset = frozenset()  # rows planned at their last seen pose
 
 
 def ramped_displacement(v_old: np.ndarray, v_new: np.ndarray, t_s: float, ramp_s: float) -> np.ndarray:
@@ -416,7 +419,7 @@ class MultiTask:
         dt = t_s - seg.t_s
         disp = ramped_displacement(seg.previous, seg.velocity, dt, self.settings.ramp_s)
         for k, g in enumerate(self.goals):
-            if g.index in self.unseen:
+            if g.index in self.unseen or g.index in seg.unseen:
                 continue
             pred = disp[k, :2]
             d = poses[g.index, :2] - seg.poses[g.index, :2]
@@ -463,6 +466,9 @@ class MultiTask:
         best_motion, _scale = fit_envelope(best_motion, self.device, s.headroom)
         final_cost, final_vel = self._costs([best_motion], poses, statuses)
         if not math.isfinite(float(final_cost[0])):
+            if not math.isfinite(float(current_cost[0])):  # nothing safe found: stop the plate
+                rest = PlateMotion.zero(self.current.frequency_hz, name="rest")
+                return self._switch(t_s, poses, rest, np.zeros((len(self.goals), 3)))
             return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
         near = all(st.position_error_m <= s.near_m for st in statuses)
         dwelt = t_s - self.t_switch >= (s.near_dwell_s if near else s.min_dwell_s) - 1e-9
@@ -477,7 +483,8 @@ class MultiTask:
             self.t_switch = t_s
         self.current = motion
         previous = np.nan_to_num(velocity) if keep else self._v_current
-        self.segment = _Segment(t_s, poses.copy(), np.nan_to_num(velocity), previous, motion.key)
+        self.segment = _Segment(t_s, poses.copy(), np.nan_to_num(velocity), previous, motion.key,
+                                frozenset(self.unseen))
         scales = np.array([self.state[g.index].scale for g in self.goals])
         self.last_prediction = {"t_s": t_s, "motion": motion, "poses": poses.copy(), "switched": changed,
                                 "velocity": np.nan_to_num(velocity) * scales[:, None],
@@ -508,8 +515,9 @@ class MultiTask:
             if tr.holding:
                 way[k] = p
                 weight[k] = s.hold_weight
-            if g.index in self.unseen:
-                weight[k] = 0.0
+            if g.index in self.unseen:  # not seen: asked to stay where it was last seen
+                way[k] = self.last_pose[g.index]
+                weight[k] = s.hold_weight
         return way, weight
 
     def _costs(self, motions: Sequence[PlateMotion], poses: np.ndarray, statuses: list[PartStatus]
@@ -518,6 +526,18 @@ class MultiTask:
         r, vel, ok = self._residuals(motions, poses, statuses)
         cost = np.sum(r ** 2, axis=1)
         cost[~ok] = np.inf
+        # Never drive a part out of the working disc: a predicted position beyond it (and beyond
+        # where the part already is) rules the candidate out.
+        cur = np.array([poses[g.index, :2] for g in self.goals])
+        r_now = np.hypot(cur[:, 0], cur[:, 1])
+        v_cur = getattr(self, "_v_current", None)
+        v_cur = np.zeros_like(vel[0]) if v_cur is None else v_cur
+        scales = np.array([self.state[g.index].scale for g in self.goals])
+        H, ramp = self.settings.horizon_s, min(self.settings.ramp_s, self.settings.horizon_s)
+        pred = cur[None] + scales[None, :, None] * (v_cur[None, :, :2] * (0.5 * ramp) + vel[..., :2] * (H - 0.5 * ramp))
+        r_pred = np.hypot(pred[..., 0], pred[..., 1])
+        out = np.any(r_pred > np.maximum(r_now, self.settings.region_radius_m)[None], axis=1)
+        cost[out] = np.inf
         return cost, vel
 
     def _residuals(self, motions, poses, statuses):

@@ -87,6 +87,11 @@ class MpcSettings:
     scale_gain: float = 0.6               # smoothing of the velocity-scale estimate per step
     scale_range: tuple[float, float] = (0.4, 4.0)
     min_predicted_m: float = 1e-3         # predicted displacements shorter than this teach nothing
+    stall_s: float = 4.0                  # no 10 % progress over this long: focus on one part ("alternate
+    focus_s: float = 3.0                  # motions") for this long, the others' weights times
+    focus_others: float = 0.2             # this (a linear field cannot serve every part at once)
+    stop_within: float = 0.6              # the plate stops when every part is within this fraction of its
+                                          # tolerances (tracker noise must not flip a part back out)
     settle_s: float = 0.5                 # within tolerance for this long: reached
     lost_after_s: float = 6.0             # a commanded part unseen this long: failed (touching parts
                                           # are lost by the tracker for a while)
@@ -334,6 +339,9 @@ class MultiTask:
         self.phase = "planning"
         self.plan_times_ms: list[float] = []
         self.last_pose: dict[int, np.ndarray] = {}
+        self.progress: list[tuple[float, float]] = []
+        self.focus: int | None = None
+        self.focus_since = -math.inf
         self.unseen: set[int] = set()
         self.switches = 0
         self.last_prediction: dict | None = None   # {"t_s", "motion", "poses", "velocity" (G, 3) scaled}
@@ -433,8 +441,13 @@ class MultiTask:
     # ------------------------------------------------------------------ planning
     def _plan(self, t_s: float, poses: np.ndarray, statuses: list[PartStatus]) -> PlateMotion | None:
         s = self.settings
-        if all(st.within for st in statuses):
-            # Every commanded part is there: stop the plate (at rest, it holds every part).
+        def well_within(g: PartGoal, st: PartStatus) -> bool:
+            f = s.stop_within
+            return st.position_error_m <= f * g.position_tol_m and (
+                st.angle_error_rad is None or abs(st.angle_error_rad) <= f * g.angle_tol_rad)
+
+        if all(well_within(g, st) for g, st in zip(self.goals, statuses)):
+            # Every commanded part is well there: stop the plate (at rest, it holds every part).
             self.phase = "holding"
             target = PlateMotion.zero(self.current.frequency_hz, name="rest")
             self._v_current = np.zeros((len(self.goals), 3))
@@ -442,6 +455,7 @@ class MultiTask:
             self._v_current = self._v_current[0]
             return self._switch(t_s, poses, target, np.zeros((len(self.goals), 3)))
         self.phase = "moving"
+        self._update_focus(t_s, statuses)
         self._v_current = np.zeros((len(self.goals), 3))
         _c, v_cur = self._costs([self.current], poses, statuses)
         self._v_current = v_cur[0]
@@ -475,6 +489,26 @@ class MultiTask:
         if dwelt and float(final_cost[0]) < (1.0 - s.switch_gain) * float(current_cost[0]):
             return self._switch(t_s, poses, best_motion, final_vel[0])
         return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
+
+    def _update_focus(self, t_s: float, statuses: list[PartStatus]) -> None:
+        s = self.settings
+        metric = sum(0.0 if st.within else st.position_error_m
+                     + s.angle_weight_m_per_rad * abs(st.angle_error_rad or 0.0)
+                     for st in statuses if math.isfinite(st.position_error_m))
+        self.progress.append((t_s, metric))
+        while len(self.progress) > 2 and t_s - self.progress[1][0] >= s.stall_s:
+            self.progress.pop(0)
+        if self.focus is not None:
+            k = next(i for i, g in enumerate(self.goals) if g.index == self.focus)
+            if t_s - self.focus_since >= s.focus_s or statuses[k].within:
+                self.focus, self.progress = None, [(t_s, metric)]
+            return
+        t0, m0 = self.progress[0]
+        unfinished = [(st.position_error_m / g.position_tol_m + (abs(st.angle_error_rad) / g.angle_tol_rad
+                                                                if st.angle_error_rad is not None else 0.0), g.index)
+                      for g, st in zip(self.goals, statuses) if not st.within and math.isfinite(st.position_error_m)]
+        if len(self.goals) > 1 and unfinished and t_s - t0 >= s.stall_s and metric > 0.9 * m0:
+            self.focus, self.focus_since = max(unfinished)[1], t_s
 
     def _switch(self, t_s, poses, motion, velocity, keep: bool = False) -> PlateMotion | None:
         changed = motion.key != self.current.key
@@ -515,6 +549,8 @@ class MultiTask:
             if tr.holding:
                 way[k] = p
                 weight[k] = s.hold_weight
+            if self.focus is not None and g.index != self.focus:
+                weight[k] *= s.focus_others
             if g.index in self.unseen:  # not seen: asked to stay where it was last seen
                 way[k] = self.last_pose[g.index]
                 weight[k] = s.hold_weight

@@ -74,7 +74,7 @@ def test_uncommanded_parts_are_not_in_the_objective_and_missing_parts_fail():
     step = task.step(0.0, [[0.03, 0.0, 0.0], [math.nan, math.nan, math.nan]])  # part 1 unseen: fine
     assert not step.failed_reason and len(step.parts) == 1
     step = task.step(3.0, [[math.nan] * 3, [0.0, 0.0, 0.0]])
-    step = task.step(5.5, [[math.nan] * 3, [0.0, 0.0, 0.0]])
+    step = task.step(6.5, [[math.nan] * 3, [0.0, 0.0, 0.0]])
     assert step.failed_reason and "not seen" in step.failed_reason
 
 

@@ -12,6 +12,20 @@ Everything runs in this process on the full models (no ROS, no camera). Sections
                bracket from several poses; time to done (device s) and the final error.
   sensorless   plan_sensorless played open loop (no poses at all): every start at once, final
                position (and orientation modulo half a turn) error, plan length and planning time.
+  multipart    the model-predictive planner (MultiTask) against today's template planner (Task, the
+               bracket only: it moves one chosen part) in the same run, closed as the stack
+               closes it: poses at 10 Hz with tracker noise (0.05 mm, 0.1 deg) and 0.1 s latency,
+               the generator's 0.5 s ramp on every switch, a random plant error per scene (gain
+               +-15 %, phase +-10 deg, coupling +-5 %) that restarts with each new motion and
+               decays as the feedback's transient does, random friction per part in 0.2-0.45
+               (the planner's models say 0.3), the simulator's part separation. Random scenes per
+               count of parts (1 = the bracket; 2 = + a washer; 3 = + a hex; 4 = + a tile):
+               starts and goals within the 0.06 m disc, not overlapping by footprint, goals at
+               least 20 mm apart, random start orientations, 60 s per scene. Reports success
+               (1 mm / 2 deg for one part, 2 mm / 3 deg for several), time to goal, final errors,
+               each part's worst deviation from its predicted path over a motion switch, and the
+               replanning time while a bounded busy loop runs on the other core.
+               ``--scenes N`` per count (default 2; the issue's full run: 20).
   physics      the simulated device's parts physics per plate cycle (PartDynamics plus the contact
                separation, SimWorld.advance_parts) for 10 parts under a sink, without the device
                process, ROS or the camera: device seconds per wall second.
@@ -23,6 +37,7 @@ examples:
   ppod bench planner
   ppod bench planner --quick
   ppod bench planner --sections design physics --out out/bench
+  ppod bench planner --sections multipart --counts 1 3 --scenes 20
 """
 
 from __future__ import annotations
@@ -36,7 +51,8 @@ from pathlib import Path
 import numpy as np
 
 HELP = "field planner: design R^2 and time, closed-loop and sensorless accuracy, physics speed"
-SECTIONS = ("design", "closed", "sensorless", "physics")
+SECTIONS = ("design", "closed", "sensorless", "physics", "multipart")
+MULTI_LABELS = ("bracket", "washer", "hex", "tile")
 GOAL = (0.02, -0.02)
 DESIGNS = [("sink", [0.0, 0.0, 0.3]), ("sink", [0.03, -0.02, 0.3]), ("sink", [0.05, 0.04, 0.3]),
            ("line_sink", [0.01, 0.0, 0.5, 0.3]), ("transport", [0.01, 0.005]), ("rotation", [0.02, 0.01, 0.2]),
@@ -44,8 +60,13 @@ DESIGNS = [("sink", [0.0, 0.0, 0.3]), ("sink", [0.03, -0.02, 0.3]), ("sink", [0.
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS),
-                        help="which sections to run (default: all)")
+    parser.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS[:4]),
+                        help="which sections to run (default: all but multipart)")
+    parser.add_argument("--scenes", type=int, default=2, help="multipart: random scenes per count (default 2; "
+                                                               "the issue's full run: 20)")
+    parser.add_argument("--counts", nargs="+", type=int, default=[1, 2, 3, 4], choices=[1, 2, 3, 4],
+                        help="multipart: counts of parts (default 1 2 3 4)")
+    parser.add_argument("--scene-seconds", type=float, default=60.0, help="multipart: device time per scene")
     parser.add_argument("--quick", action="store_true", help="fewer designs, starts and seconds")
     parser.add_argument("--seed", type=int, default=0, help="tracker-noise seed (default 0)")
 
@@ -191,6 +212,191 @@ def bench_physics(quick: bool) -> list[dict]:
     return rows
 
 
+
+# ---------------------------------------------------------------------------------- multipart
+def _multi_scene(count: int, rng: np.random.Generator, templates: dict) -> dict:
+    """Random starts and goals (within the 0.06 m disc, footprints apart, goals >= 20 mm apart),
+    random start orientations and friction per part."""
+    from ppod_ros.planning.mpc import part_radius_m
+
+    labels = MULTI_LABELS[:count]
+    radii = [part_radius_m(templates[lb].part) for lb in labels]
+
+    def place(min_gap: float) -> list:
+        for _ in range(2000):
+            pts = []
+            for r in radii:
+                for _ in range(200):
+                    rho, a = 0.06 * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
+                    xy = np.array([rho * math.cos(a), rho * math.sin(a)])
+                    if math.hypot(*xy) + r > 0.065:
+                        continue
+                    if all(math.hypot(*(xy - q)) >= max(min_gap, r + rq + 0.002) for q, rq in zip(pts, radii)):
+                        pts.append(xy)
+                        break
+                else:
+                    break
+            if len(pts) == count:
+                return pts
+        raise RuntimeError("cannot place the scene")
+
+    starts = place(0.0)
+    goals = place(0.02)
+    thetas = rng.uniform(-math.pi, math.pi, count)
+    mus = rng.uniform(0.2, 0.45, count)
+    return {"labels": list(labels), "starts": [[float(p[0]), float(p[1]), float(t)] for p, t in zip(starts, thetas)],
+            "goals": [[float(g[0]), float(g[1])] for g in goals], "goal_theta": float(rng.uniform(-math.pi, math.pi)),
+            "mu": [float(m) for m in mus], "plant_seed": int(rng.integers(1 << 30))}
+
+
+def _true_part(part, mu: float):
+    import dataclasses
+
+    from ppod_ros.parts import RigidPart
+
+    if isinstance(part, RigidPart):
+        return dataclasses.replace(part, mu=np.full(len(part.mu), mu), mu_static=None)
+    return dataclasses.replace(part, mu=mu, mu_static=None)
+
+
+def _separation(scene_parts):
+    from ppod_sim.scene import separate
+
+    circles = [p.circles for p in scene_parts]
+    masses = np.array([p.mass_kg for p in scene_parts])
+    active = np.ones(len(scene_parts), bool)
+
+    def sep(cfg: np.ndarray, tw: np.ndarray) -> np.ndarray:
+        xy, v = cfg[:, :2].copy(), tw[:, :2].copy()
+        moved = separate(xy, v, cfg[:, 2].copy(), circles, masses, active)
+        cfg[:, :2], tw[:, :2] = xy, v
+        return moved
+
+    return sep
+
+
+def _busy(deadline: float) -> None:
+    x = 0.0
+    while time.time() < deadline:
+        for i in range(10000):
+            x += i * 1e-9
+
+
+def _switch_deviations(records: list, run, goals) -> list[float]:
+    """Per commanded part: the worst distance of its true path from the predicted one over each
+    switch (from the switch to the next replanning after the ramp)."""
+    from ppod_ros.planning.mpc import ramped_displacement
+
+    times, traj = run.times, run.trajectory
+    worst = [0.0] * len(goals)
+    for k, rec in enumerate(records):
+        ts = rec["t_s"]
+        te = records[k + 1]["t_s"] if k + 1 < len(records) else ts + rec["ramp_s"] + 0.5
+        te = min(te, ts + rec["ramp_s"] + 1.0)
+        i0 = int(np.searchsorted(times, ts - 1e-9))
+        for row in range(i0 + 1, len(times)):
+            if times[row] > te + 1e-9:
+                break
+            d = ramped_displacement(rec["previous"], rec["velocity"], times[row] - ts, rec["ramp_s"])
+            for g, goal in enumerate(goals):
+                pred = traj[i0, goal.index, :2] + d[g, :2]
+                worst[g] = max(worst[g], float(np.hypot(*(traj[row, goal.index, :2] - pred))))
+    return worst
+
+
+def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float) -> tuple[list[dict], list]:
+    import importlib.resources as resources
+    import multiprocessing
+
+    from ppod_ros.config.fields import load_yaml_file
+    from ppod_ros.parts import part_from_dict
+    from ppod_ros.planning import Task
+    from ppod_ros.planning.mpc import MultiTask, PartGoal
+    from ppod_ros.planning.simulate import PlantError, run_on_dynamics
+    from ppod_sim.ros_node import default_scene_path
+    from ppod_sim.scene import ScenePart, load_scene
+
+    templates = {p.label: p for p in load_scene(default_scene_path()).parts}
+    tracker = load_yaml_file(str(resources.files("ppod_ros") / "data" / "tracker.yaml"), "tracker")
+    models = {}
+    for item in tracker["parts"]:
+        if item["label"] in MULTI_LABELS:
+            models[item["label"]] = (part_from_dict(item["part"]) if item.get("part") is not None
+                                     else _true_part(templates[item["label"]].part, 0.3))
+    busy = multiprocessing.get_context("spawn").Process(target=_busy, args=(time.time() + 3600.0,), daemon=True)
+    busy.start()
+    rows, paths = [], []
+    try:
+        for count in counts:
+            rng = np.random.default_rng(1000 * seed + count)
+            for n in range(n_scenes):
+                sc = _multi_scene(count, rng, templates)
+                labels = sc["labels"]
+                model_parts = [models[lb] for lb in labels]
+                true_parts = [_true_part(templates[lb].part, mu) for lb, mu in zip(labels, sc["mu"])]
+                scene_parts = [ScenePart(lb, tp, templates[lb].height_m, np.array(st))
+                               for lb, tp, st in zip(labels, true_parts, sc["starts"])]
+                pos_tol, ang_tol = (1e-3, math.radians(2)) if count == 1 else (2e-3, math.radians(3))
+                goals = [PartGoal(i, g[0], g[1], sc["goal_theta"] if lb == "bracket" else None, pos_tol, ang_tol)
+                         for i, (lb, g) in enumerate(zip(labels, sc["goals"]))]
+                for planner in ("mpc", "template"):
+                    if planner == "mpc":
+                        task = MultiTask(model_parts, goals, timeout_s=scene_s)
+                        records = []
+                        step0 = task.step
+
+                        def step(t, poses, _task=task, _records=records, _step=step0):
+                            out = _step(t, poses)
+                            if out.motion is not None and _task.last_prediction is not None:
+                                _records.append(dict(_task.last_prediction))
+                            return out
+
+                        task.step = step
+                    else:
+                        g0 = goals[0]
+                        task = Task(model_parts, 0, (g0.x_m, g0.y_m, g0.theta_rad), position_tol_m=pos_tol,
+                                    angle_tol_rad=ang_tol, timeout_s=scene_s)
+                    w0 = time.perf_counter()
+                    plant = PlantError.random(np.random.default_rng(sc["plant_seed"]))
+                    run = run_on_dynamics(task, true_parts, sc["starts"], horizon_s=scene_s + 1.0, ramp_s=0.5,
+                                          latency_s=0.1, plant=plant,
+                                          separate=_separation(scene_parts), seed=sc["plant_seed"] % 1000,
+                                          keep_steps=True)
+                    wall = time.perf_counter() - w0
+                    commanded = goals if planner == "mpc" else goals[:1]
+                    final = run.configurations
+                    parts_out = []
+                    for g in commanded:
+                        e = math.hypot(final[g.index, 0] - g.x_m, final[g.index, 1] - g.y_m)
+                        a = None if g.theta_rad is None else abs(math.degrees(
+                            (final[g.index, 2] - g.theta_rad + math.pi) % (2 * math.pi) - math.pi))
+                        parts_out.append({"label": labels[g.index], "mu": sc["mu"][g.index], "error_mm": 1e3 * e,
+                                          "angle_deg": a,
+                                          "reached": e <= g.position_tol_m and (a is None or a <= math.degrees(
+                                              g.angle_tol_rad))})
+                    ttg = None
+                    if planner == "mpc" and run.step is not None and run.step.parts:
+                        tt = [st.time_to_goal_s for st in run.step.parts]
+                        ttg = None if any(t is None for t in tt) else max(tt)
+                    elif run.step is not None and run.step.done:
+                        ttg = run.elapsed_s
+                    row = {"planner": planner, "count": count, "scene": n, "done": bool(run.step and run.step.done),
+                           "success": bool(run.step and run.step.done) and all(p["reached"] for p in parts_out),
+                           "device_s": run.elapsed_s, "time_to_goal_s": ttg, "parts": parts_out, "hops": run.hops,
+                           "switches": len(run.switch_times), "wall_s": wall, "text": run.step.text if run.step else ""}
+                    if planner == "mpc":
+                        row["plan_ms"] = list(map(float, task.plan_times_ms[1:]))  # the first pays the designs
+                        row["switch_deviation_mm"] = [1e3 * d for d in _switch_deviations(records, run, goals)]
+                    rows.append(row)
+                    if planner == "mpc":
+                        paths += [run.trajectory[:, i, :2] for i in range(count)]
+                    print(f"  {count} part(s), scene {n}, {planner:8s}: {'ok ' if row['success'] else 'NOT'} "
+                          f"{row['text'][:110]}", flush=True)
+    finally:
+        busy.terminate()
+        busy.join(5)
+    return rows, paths
+
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -205,6 +411,12 @@ def run(args: argparse.Namespace) -> int:
     if "sensorless" in args.sections:
         print("Sensorless (no poses), goal (0.02, -0.02):")
         result["sensorless"], paths["sensorless"] = bench_sensorless(args.quick)
+    if "multipart" in args.sections:
+        print(f"Several parts at once: the model-predictive planner vs the template planner, {args.scenes} random "
+              f"scenes per count {args.counts} (see --help for the loop):")
+        result["multipart"], paths["multipart"] = bench_multipart(
+            list(getattr(args, "counts", [1, 2, 3, 4])), int(getattr(args, "scenes", 2)), args.seed,
+            float(getattr(args, "scene_seconds", 60.0)))
     if "physics" in args.sections:
         print("Parts physics of the simulated device (no device process, ROS or camera), sink at the centre:")
         result["physics"] = bench_physics(args.quick)
@@ -244,6 +456,29 @@ def _summary(r: dict) -> None:
         ang = "" if x["max_angle_deg_mod_180"] is None else f", <= {x['max_angle_deg_mod_180']:.2f} deg mod 180"
         print(f"  sensorless, {x['part']}: {x['starts']} starts, {x['plan_s']:.1f} s plan, final "
               f"<= {x['max_error_mm']:.2f} mm{ang}")
+    multi = r.get("multipart", [])
+    for count in sorted({x["count"] for x in multi}):
+        for planner in ("mpc", "template"):
+            rows = [x for x in multi if x["count"] == count and x["planner"] == planner]
+            if not rows:
+                continue
+            ok = [x for x in rows if x["success"]]
+            ttg = sorted(x["time_to_goal_s"] for x in ok if x["time_to_goal_s"] is not None)
+            errs = [p["error_mm"] for x in rows for p in x["parts"]]
+            angs = [p["angle_deg"] for x in rows for p in x["parts"] if p["angle_deg"] is not None]
+            line = (f"  multipart {count}, {planner:8s}: {len(ok)}/{len(rows)} reached"
+                    + (f", time to goal median {np.median(ttg):.1f} s, worst {max(ttg):.1f} s" if ttg else "")
+                    + f"; final error median {np.median(errs):.2f} mm, worst {max(errs):.2f} mm"
+                    + (f", angle worst {max(angs):.2f} deg" if angs else ""))
+            if planner == "mpc":
+                dev = [d for x in rows for d in x["switch_deviation_mm"]]
+                plan = [t for x in rows for t in x["plan_ms"]]
+                line += (f"; worst deviation over a switch {max(dev):.2f} mm" if dev else "") + (
+                    f"; replanning median {np.median(plan):.0f} ms, 95th pct {np.percentile(plan, 95):.0f} ms"
+                    if plan else "")
+            else:
+                line += " (the bracket only)"
+            print(line)
     for x in r.get("physics", []):
         print(f"  physics, {x['parts']}: {x['real_time_factor']:.0f}x real time   target >= 20x")
 
@@ -260,8 +495,10 @@ def _plot(paths: dict, path: Path) -> None:
         for tr in tracks:
             ax.plot(1e3 * tr[:, 0], 1e3 * tr[:, 1], lw=1)
             ax.plot(1e3 * tr[0, 0], 1e3 * tr[0, 1], "o", ms=3, color="0.3")
-        ax.plot(1e3 * GOAL[0], 1e3 * GOAL[1], "r+", ms=12)
-        ax.set_title({"closed": "closed loop (Task), full dynamics", "sensorless": "sensorless plan, no poses"}[name])
+        if name != "multipart":
+            ax.plot(1e3 * GOAL[0], 1e3 * GOAL[1], "r+", ms=12)
+        ax.set_title({"closed": "closed loop (Task), full dynamics", "sensorless": "sensorless plan, no poses",
+                      "multipart": "several parts at once (MultiTask)"}[name])
         ax.set_aspect("equal")
         ax.set_xlabel("x (mm)")
         ax.set_ylabel("y (mm)")

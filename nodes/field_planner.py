@@ -14,11 +14,16 @@ Interfaces (names in ppod_nodes.common.topics):
                                            and updating fields from the tracked poses (a Task); with
                                            ``sensorless``, a plan of fields played open loop on the
                                            node's clock (a SensorlessTask), poses only reported
+  ppod/move_parts  (ppod_msgs/MoveParts)   several parts, each to its own pose, at once: the
+                                           model-predictive planner (a MultiTask) chooses the plate
+                                           motion itself; per-part tolerances and feedback; goals
+                                           that collide or leave the working region are rejected
+                                           with the reason
   ppod/part_poses  (in)                    the tracker's poses; the Task steps on each array
   ppod/plate_motion_goal (out)             the motions it designs, for the waveform generator
   ppod/stop        (client)                ramp the plate down when a task ends or is cancelled
 
-One MovePart goal runs at a time (a field moves every part on the plate); a new goal is rejected
+One MovePart or MoveParts goal runs at a time (a field moves every part on the plate); a new goal is rejected
 while one runs. The Task steps in the pose subscription's callback, a SensorlessTask in a 10 Hz
 timer (device time under ``ppod up --sim``: use_sim_time); the action's execute coroutine only
 waits for the outcome, so the single-threaded executor never blocks on it.
@@ -34,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from ppod_msgs.action import MovePart
+from ppod_msgs.action import MovePart, MoveParts
 from ppod_msgs.msg import PartPose, PartPoseArray
 from ppod_msgs.msg import PlateMotion as PlateMotionMsg
 from ppod_msgs.srv import PlanField
@@ -53,6 +58,7 @@ from ppod_ros.device import load_device_config
 from ppod_ros.errors import ConfigError, PpodError
 from ppod_ros.parts import Footprint, PointPart, part_from_dict, part_from_yaml_text
 from ppod_ros.planning import FieldSpec, SensorlessTask, Task, design_field, plan_sensorless
+from ppod_ros.planning.mpc import MultiTask, PartGoal, base_design
 
 
 def part_models_from_tracker_file(path: str | Path, default_mu: float) -> dict[str, Any]:
@@ -73,6 +79,52 @@ def part_models_from_tracker_file(path: str | Path, default_mu: float) -> dict[s
     return models
 
 
+def part_goals_from_request(goal, ids: list[int], default_tol_m: float, default_tol_rad: float) -> list[PartGoal]:
+    """MoveParts goal fields -> PartGoals in the rows of ``ids`` (the tracked parts' order);
+    ConfigError naming the field for lists of the wrong length or parts not tracked."""
+    n = len(goal.part_ids)
+    if n == 0:
+        raise ConfigError("part_ids: expected at least one part")
+    if len(goal.targets) != n:
+        raise ConfigError(f"targets: expected {n} poses (one per part_ids entry), got {len(goal.targets)}")
+    for name in ("use_orientation", "position_tolerance_m", "orientation_tolerance_rad"):
+        got = len(getattr(goal, name))
+        if got not in (0, n):
+            raise ConfigError(f"{name}: expected 0 or {n} entries, got {got}")
+    out = []
+    for i, pid in enumerate(goal.part_ids):
+        if int(pid) not in ids:
+            raise ConfigError(f"part_ids[{i}]: part {pid} is not tracked")
+        t = goal.targets[i]
+        oriented = bool(goal.use_orientation[i]) if len(goal.use_orientation) else False
+        tol = float(goal.position_tolerance_m[i]) if len(goal.position_tolerance_m) else 0.0
+        atol = float(goal.orientation_tolerance_rad[i]) if len(goal.orientation_tolerance_rad) else 0.0
+        out.append(PartGoal(ids.index(int(pid)), float(t.x), float(t.y), float(t.theta) if oriented else None,
+                            tol or default_tol_m, atol or default_tol_rad))
+    return out
+
+
+#: A lost track is taken over by a new one of the same label within this distance (m): touching
+#: parts are lost by the tracker and come back under new ids.
+REASSOCIATE_M = 0.02
+
+
+def reassociate(ids: list[int], labels: list, last_xy: list, by_id: dict) -> None:
+    """Rows whose track is gone take over the nearest new track (an id in no row) of the same
+    label within REASSOCIATE_M of where the row was last seen (in place)."""
+    taken = set(ids)
+    for row, pid in enumerate(ids):
+        if pid in by_id or last_xy[row] is None:
+            continue
+        x, y = last_xy[row]
+        near = [(math.hypot(p.pose.x - x, p.pose.y - y), nid) for nid, p in by_id.items()
+                if nid not in taken and p.label == labels[row]]
+        near = [c for c in near if c[0] <= REASSOCIATE_M]
+        if near:
+            ids[row] = min(near)[1]
+            taken.add(ids[row])
+
+
 class _RunningTask:
     """The MovePart goal being executed: its handle, the Task, the track ids in Task order."""
 
@@ -85,6 +137,9 @@ class _RunningTask:
         self.done: Future = Future()
         self.last_motion_key = None
         self.last_step = None
+        self.multi = isinstance(task, MultiTask)
+        self.labels: list[str | None] = [None] * len(ids)   # per row, as last seen
+        self.last_xy: list[tuple[float, float] | None] = [None] * len(ids)
 
 
 class FieldPlannerNode(PpodLifecycleNode):
@@ -117,6 +172,8 @@ class FieldPlannerNode(PpodLifecycleNode):
         self._stop_client = self.create_client(Trigger, topics.STOP)
         self._action = ActionServer(self, MovePart, topics.MOVE_PART, execute_callback=self._execute,
                                     goal_callback=self._on_goal_request, cancel_callback=self._on_cancel)
+        self._multi_action = ActionServer(self, MoveParts, topics.MOVE_PARTS, execute_callback=self._execute_multi,
+                                          goal_callback=self._on_multi_request, cancel_callback=self._on_cancel)
         self.create_timer(0.1, self._on_sensorless_tick)
 
     # ------------------------------------------------------------------ lifecycle
@@ -125,6 +182,8 @@ class FieldPlannerNode(PpodLifecycleNode):
         tracker = params["tracker_config"] or str(resources.files("ppod_ros") / "data" / "tracker.yaml")
         self.models = part_models_from_tracker_file(tracker, params["default_mu"])
         self.get_logger().info(f"part models: {', '.join(f'{k} ({v.kind})' for k, v in self.models.items())}")
+        for kind in ("sink", "rotation"):  # the MoveParts planner's templates, designed once here
+            base_design(kind, self.device)
 
     def on_deactivate_node(self):
         if self.running is not None:
@@ -185,6 +244,74 @@ class FieldPlannerNode(PpodLifecycleNode):
             self.get_logger().warning(f"MovePart rejected: part {goal.part_id} is not tracked")
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
+
+    def _on_multi_request(self, goal: MoveParts.Goal) -> GoalResponse:
+        if self.lifecycle_state != "active":
+            self.get_logger().warning("MoveParts rejected: the planner is not active")
+            return GoalResponse.REJECT
+        if self.running is not None:
+            self.get_logger().warning("MoveParts rejected: another goal is running (a field moves every part)")
+            return GoalResponse.REJECT
+        try:
+            self._build_multi(goal)
+        except PpodError as exc:
+            self.get_logger().warning(f"MoveParts rejected: {exc}")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _build_multi(self, goal: MoveParts.Goal) -> tuple[MultiTask, list[int]]:
+        parts, ids = [], []
+        for p in (self._poses.parts if self._poses is not None else []):
+            model = self.models.get(p.label)
+            if model is None:
+                model = PointPart(mu=self.params["default_mu"])
+            parts.append(model)
+            ids.append(int(p.id))
+        p = self.params
+        goals = part_goals_from_request(goal, ids, p["position_tolerance_m"],
+                                        math.radians(p["orientation_tolerance_deg"]))
+        task = MultiTask(parts, goals, device=self.device, timeout_s=goal.timeout_s or p["timeout_s"],
+                         keep_clear=bool(goal.keep_others_clear))
+        return task, ids
+
+    async def _execute_multi(self, handle) -> MoveParts.Result:
+        goal: MoveParts.Goal = handle.request
+        result = MoveParts.Result()
+        try:
+            task, ids = self._build_multi(goal)
+        except PpodError as exc:
+            handle.abort()
+            result.success, result.reason = False, str(exc)
+            self.get_logger().error(f"MoveParts: {exc}")
+            return result
+        self.running = _RunningTask(handle, task, ids, goal, self._now())
+        self.get_logger().info("MoveParts: " + ", ".join(
+            f"part {g_id} to ({t.x:.4f}, {t.y:.4f}" + (f", {math.degrees(t.theta):.1f} deg)" if g.theta_rad is not None
+                                                       else ")")
+            for g_id, t, g in zip(goal.part_ids, goal.targets, task.goals)))
+        running = self.running
+        success, reason = await running.done
+        step = running.last_step
+        result.success, result.reason = bool(success), reason
+        result.elapsed_s = self._now() - running.started_s
+        result.part_ids = [int(v) for v in goal.part_ids]
+        statuses = {st.index: st for st in (step.parts if step is not None else ())}
+        for g, pid in zip(task.goals, goal.part_ids):
+            st = statuses.get(g.index)
+            result.reached.append(bool(st is not None and st.reached))
+            result.position_error_m.append(float(st.position_error_m) if st is not None else math.nan)
+            result.orientation_error_rad.append(float(st.angle_error_rad or 0.0) if st is not None else 0.0)
+            result.time_to_goal_s.append(float(st.time_to_goal_s) if st is not None and st.reached else -1.0)
+            pose = self._pose_of(int(pid))
+            result.final_poses.append(pose.pose if pose is not None else type(goal.targets[0])())
+        if handle.is_cancel_requested:
+            handle.canceled()
+        elif success:
+            handle.succeed()
+        else:
+            handle.abort()
+        self.get_logger().info(f"MoveParts {'succeeded' if success else 'ended'}: {reason}")
+        return result
 
     def _on_cancel(self, _handle) -> CancelResponse:
         return CancelResponse.ACCEPT
@@ -282,11 +409,15 @@ class FieldPlannerNode(PpodLifecycleNode):
             return
         parts = self._poses.parts if self._poses is not None else []
         by_id = {int(p.id): p for p in parts if p.status != PartPose.STATUS_LOST}
+        if run.multi:
+            reassociate(run.ids, run.labels, run.last_xy, by_id)
         poses = np.full((len(run.ids), 3), np.nan)
         for row, pid in enumerate(run.ids):
             p = by_id.get(pid)
             if p is not None:
                 poses[row] = (p.pose.x, p.pose.y, p.pose.theta)
+                run.last_xy[row] = (p.pose.x, p.pose.y)
+                run.labels[row] = p.label
         t0 = time.perf_counter()
         try:
             step = run.task.step(t_s, poses)
@@ -297,11 +428,20 @@ class FieldPlannerNode(PpodLifecycleNode):
         if step.motion is not None and step.motion.key != run.last_motion_key:
             run.last_motion_key = step.motion.key
             self.goal_pub.publish(motion_to_msg(step.motion, self.get_clock().now().to_msg()))
-        fb = MovePart.Feedback(phase=step.phase, text=step.text, position_error_m=float(step.position_error_m),
-                               orientation_error_rad=float(step.angle_error_rad or 0.0))
-        pose = by_id.get(int(run.goal.part_id))
-        if pose is not None:
-            fb.current_pose = pose.pose
+        if run.multi:
+            fb = MoveParts.Feedback(phase=step.phase, text=step.text, plan_ms=float(step.plan_ms))
+            for st in step.parts:
+                fb.part_ids.append(int(run.ids[st.index]))
+                fb.position_error_m.append(float(st.position_error_m))
+                fb.orientation_error_rad.append(float(st.angle_error_rad or 0.0))
+                fb.within.append(bool(st.within))
+                fb.velocity_scale.append(float(st.velocity_scale))
+        else:
+            fb = MovePart.Feedback(phase=step.phase, text=step.text, position_error_m=float(step.position_error_m),
+                                   orientation_error_rad=float(step.angle_error_rad or 0.0))
+            pose = by_id.get(int(run.goal.part_id))
+            if pose is not None:
+                fb.current_pose = pose.pose
         run.handle.publish_feedback(fb)
         self.diagnostics.set("task", diag.OK, step.text, phase=step.phase,
                              position_error_m=step.position_error_m, step_ms=1e3 * (time.perf_counter() - t0))

@@ -1,6 +1,15 @@
-"""The full demo: the stack against the simulated device moves a chosen part to a goal pose.
+"""The full demo: the stack against the simulated device moves parts to goal poses.
 
-Starts every node (`ppod up --sim`: simulated device with parts scattered on the plate, waveform
+By default (and with ``--goals GOALS.yaml``) several parts at once, each to its own goal: the
+field_planner's MoveParts action (the model-predictive planner, docs/planner.md). The default set:
+the bracket to (0.02, -0.02) at 0 deg, the two washers to (-0.03, 0.02) and (0.03, 0.03). It
+prints the progress and then, from the simulator's ground truth, each commanded part's final pose
+and error, and writes ``OUT/summary.json`` (always, on timeout or failure too; format in
+docs/planner.md), the picture of each part's path to its goal (``OUT/demo.png``), the animation,
+the session as MCAP and every node's log. ``--timeout S`` bounds the device time of the whole set.
+
+With ``--part``/``--goal`` (not combined with ``--goals``), one part with MovePart, as before:
+starts every node (`ppod up --sim`: simulated device with parts scattered on the plate, waveform
 generator, accelerometer feedback, part tracker on the simulated camera, field planner), waits until
 the tracker sees every part, then asks the field_planner (MovePart action) to bring the chosen part
 to the goal pose from camera feedback; the other parts are gathered in the same sink around it (a
@@ -13,7 +22,9 @@ plate's acceleration-tracking error, and how the device clock kept up with real 
 (`ppod replay OUT/session.mcap --against-sim` replays it) and every node's log.
 
 examples:
-  ppod demo                                    the default scene, the bracket to (0.02, -0.02) at 0 deg
+  ppod demo                                    three parts of the default scene to three goals at once
+  ppod demo --goals goals.yaml --out out/g1    any set of goals (GOALS.yaml: docs/planner.md)
+  ppod demo --part bracket --goal 0.02 -0.02 0 one part with MovePart, the others gathered
   ppod demo --part washer --goal 0.03 0.03     a point part (position only)
   ppod demo --goal 0 -0.03 90 --out out/demo2
   ppod demo --no-collect --verbose             only the chosen part counts; every node's log shown
@@ -38,10 +49,15 @@ HELP = "the full demo: the stack against the simulated device brings a part to a
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scene", type=Path, help="scene YAML for the simulated device (default: the packaged one)")
-    parser.add_argument("--part", default="bracket",
-                        help="the part to move: a scene label (first match) or index (default: bracket)")
-    parser.add_argument("--goal", nargs="+", type=float, default=[0.02, -0.02, 0.0], metavar="V",
-                        help="goal X Y [THETA_DEG] in the plate frame (m, m, deg; default 0.02 -0.02 0); "
+    parser.add_argument("--goals", type=Path, metavar="GOALS.yaml",
+                        help="several parts to their own goals at once (docs/planner.md); default without "
+                             "--part/--goal: the bracket and the two washers of the default scene")
+    parser.add_argument("--keep-clear", action="store_true",
+                        help="with several goals: also keep the predicted paths clear of the parts not commanded")
+    parser.add_argument("--part", default=None,
+                        help="one part with MovePart: a scene label (first match) or index (default: bracket)")
+    parser.add_argument("--goal", nargs="+", type=float, default=None, metavar="V",
+                        help="one part's goal X Y [THETA_DEG] in the plate frame (m, m, deg; default 0.02 -0.02 0); "
                              "no THETA: position only")
     parser.add_argument("--mismatch", choices=["zero", "default"], default="default",
                         help="plant mismatch of the simulated device: 'default', as configured (gain, phase, "
@@ -50,7 +66,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-collect", action="store_true",
                         help="finish as soon as the chosen part is there (default: also wait, up to half the "
                              "timeout, until the others are gathered within 40 mm of the goal)")
-    parser.add_argument("--timeout", type=float, default=90.0, help="MovePart timeout, device-clock s (default 90)")
+    parser.add_argument("--timeout", type=float, default=90.0,
+                        help="device-clock s for the goal (or the whole set of goals) from its start (default 90)")
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
     parser.add_argument("--no-animation", action="store_true", help="skip the GIF (saves a few seconds)")
     parser.add_argument("--no-record", action="store_true", help="do not record the session to MCAP")
@@ -88,8 +105,20 @@ def run(args: argparse.Namespace) -> int:
     from ppod_sim.ros_node import default_scene_path
     from ppod_sim.scene import load_scene
 
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise ConfigError(f"--timeout: expected seconds > 0, got {args.timeout}")
     scene_path = args.scene or default_scene_path()
     scene = load_scene(scene_path)
+    if args.goals is not None and (args.part is not None or args.goal is not None):
+        raise ConfigError("--goals: not combined with --part/--goal (give every goal in the file)")
+    if args.part is None and args.goal is None:
+        from ppod_nodes.cli.demo_multi import MultiDemo, goals_for_scene
+
+        goals = goals_for_scene(scene, args.goals)
+        args.out.mkdir(parents=True, exist_ok=True)
+        return MultiDemo(args, scene, scene_path, goals).run()
+    args.part = args.part or "bracket"
+    args.goal = args.goal if args.goal is not None else [0.02, -0.02, 0.0]
     chosen = _choose(scene, args.part)
     rigid = scene.parts[chosen].part.kind == "rigid"
     goal = _goal(args.goal, rigid)
@@ -111,11 +140,7 @@ class _Demo:
 
         args = self.args
         log_path = args.out / "stack.log"
-        _say(f"scene {self.scene_path}: {len(self.scene.parts)} parts "
-             f"({', '.join(p.label for p in self.scene.parts)}); moving #{self.chosen} "
-             f"({self.scene.parts[self.chosen].label}) to ({self.goal[0]:.3f}, {self.goal[1]:.3f} m"
-             + (f", {math.degrees(self.goal[2]):.0f} deg)" if self.goal[2] is not None else ")")
-             + (", the others gathered in the same sink" if self.collect else ""))
+        self._intro()
         _say(f"node logs: {log_path}" + (" (also shown here)" if args.verbose else ""))
         wall0 = time.monotonic()
         with open(log_path, "w", encoding="utf-8") as log:
@@ -134,6 +159,13 @@ class _Demo:
         _say(f"stack stopped; wall time {time.monotonic() - wall0:.1f} s")
         self._figures()
         return code
+
+    def _intro(self) -> None:
+        _say(f"scene {self.scene_path}: {len(self.scene.parts)} parts "
+             f"({', '.join(p.label for p in self.scene.parts)}); moving #{self.chosen} "
+             f"({self.scene.parts[self.chosen].label}) to ({self.goal[0]:.3f}, {self.goal[1]:.3f} m"
+             + (f", {math.degrees(self.goal[2]):.0f} deg)" if self.goal[2] is not None else ")")
+             + (", the others gathered in the same sink" if self.collect else ""))
 
     # ------------------------------------------------------------------ the run
     def _drive(self, stack) -> int:

@@ -32,6 +32,7 @@ SUBCOMMANDS: dict[str, str] = {
     "replay": "replay",
     "bench": "bench",
     "calibrate": "calibrate",
+    "move": "move",
 }
 
 EPILOG = """examples:

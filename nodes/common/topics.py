@@ -22,6 +22,7 @@ PART_POSES = "ppod/part_poses"                   # ppod_msgs/PartPoseArray
 # planner
 PLAN_FIELD = "ppod/plan_field"                   # ppod_msgs/PlanField service
 MOVE_PART = "ppod/move_part"                     # ppod_msgs/MovePart action
+MOVE_PARTS = "ppod/move_parts"                   # ppod_msgs/MoveParts action
 # simulation only
 SIM_TRUE_POSES = "ppod/sim/ground_truth/part_poses"        # ppod_msgs/PartPoseArray
 SIM_TRUE_ACCELERATION = "ppod/sim/ground_truth/plate_acceleration"  # ppod_msgs/PlateAcceleration

@@ -197,3 +197,36 @@ def write_animation(path: Path, t: np.ndarray, poses: np.ndarray, parts, chosen:
             writer.grab_frame()
     plt.close(fig)
     return len(times)
+
+
+def write_multi_picture(path: Path, t: np.ndarray, poses: np.ndarray, parts, goals, final_motion: PlateMotion | None,
+                        cache: FieldCache, title: str) -> None:
+    """Several parts, each to its own goal: every commanded part's path (T, N, 3 ground truth) in
+    its own colour to its goal ``(index, x, y, theta or None)``, over the field of the last motion;
+    uncommanded parts in grey."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig, ax = plt.subplots(figsize=(7, 7))
+    _draw_field(ax, cache, final_motion)
+    commanded = {g[0]: colors[k % len(colors)] for k, g in enumerate(goals)}
+    for i in range(poses.shape[1]):
+        color = commanded.get(i, "tab:gray")
+        ax.plot(poses[:, i, 0], poses[:, i, 1], "-", color=color, lw=1.2 if i in commanded else 0.6)
+        for pose, alpha in ((poses[0, i], 0.3), (poses[-1, i], 1.0)):
+            pts = _outline(parts[i], pose)
+            if pts is not None:
+                ax.fill(pts[:, 0], pts[:, 1], color=color, alpha=0.6 * alpha, lw=0)
+    for index, x, y, theta in goals:
+        color = commanded[index]
+        ax.plot(x, y, "+", color=color, ms=14, mew=2)
+        if theta is not None:
+            ax.arrow(x, y, 0.012 * math.cos(theta), 0.012 * math.sin(theta), color=color, width=0.0006,
+                     head_width=0.003, length_includes_head=True)
+    _frame_axes(ax, title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

@@ -63,3 +63,66 @@ def test_the_picture_and_the_animation_are_written(tmp_path):
     png, gif = (tmp_path / "demo.png").read_bytes(), (tmp_path / "demo.gif").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
     assert gif[:6] in (b"GIF87a", b"GIF89a")
+
+
+def test_the_multi_goal_summary_follows_the_ground_truth(tmp_path):
+    import json
+
+    from ppod_nodes.cli.demo_multi import goals_for_scene, summarize
+    from ppod_nodes.demo.figures import write_multi_picture
+
+    scene = load_scene(default_scene_path())
+    goals = goals_for_scene(scene, None)  # the default set: the bracket, oriented, and the two washers
+    assert [g["label"] for g in goals] == ["bracket", "washer", "washer"]
+    assert goals[0]["theta_rad"] == 0.0 and goals[1]["theta_rad"] is None and goals[1]["index"] != goals[2]["index"]
+    t = np.arange(0.0, 10.01, 0.1)
+    poses = np.repeat(scene.poses[None], len(t), axis=0)
+    for g in goals:  # each commanded part arrives at its goal at t = 5 s; the second never quite does
+        arrive = t >= 5.0
+        poses[arrive, g["index"], 0], poses[arrive, g["index"], 1] = g["x"], g["y"]
+        poses[arrive, g["index"], 2] = 0.0
+    poses[:, goals[2]["index"], 0] += 0.003 * (t >= 5.0)
+    s = summarize(goals, [p.part for p in scene.parts], t, poses, 1.0, 9.0, 1.5)
+    assert s["all_reached"] is False and s["device_time_s"] == 9.0 and s["real_time_factor"] == 1.5
+    assert [e["index"] for e in s["parts"]] == [g["index"] for g in goals]  # one entry per goal, in order
+    first, _second, third = s["parts"]
+    assert first["reached"] and first["time_to_goal_s"] == pytest.approx(4.0) and first["angle_error_deg"] == 0.0
+    assert first["goal"] == [0.02, -0.02, 0.0] and len(first["final"]) == 3
+    assert not third["reached"] and third["time_to_goal_s"] is None and third["angle_error_deg"] is None
+    assert third["position_error_m"] == pytest.approx(0.003)
+    json.dumps(s)  # JSON as it stands
+    write_multi_picture(tmp_path / "multi.png", t, poses, [p.part for p in scene.parts],
+                        [(g["index"], g["x"], g["y"], g["theta_rad"]) for g in goals], LINESINKX, FieldCache(n=7),
+                        "test")
+    assert (tmp_path / "multi.png").stat().st_size > 1000
+
+
+def test_goals_are_not_combined_with_part_or_goal():
+    import argparse
+
+    from ppod_nodes.cli import demo
+
+    parser = argparse.ArgumentParser()
+    demo.add_arguments(parser)
+    args = parser.parse_args(["--goals", "g.yaml", "--part", "washer"])
+    with pytest.raises(ConfigError, match="--goals: not combined with --part/--goal"):
+        demo.run(args)
+    args = parser.parse_args(["--timeout", "-1"])
+    with pytest.raises(ConfigError, match="--timeout"):
+        demo.run(args)
+    assert parser.parse_args([]).goals is None
+
+
+def test_the_planner_node_gives_a_lost_track_to_a_new_one_of_the_same_label_nearby():
+    from types import SimpleNamespace
+
+    from ppod_nodes.field_planner import reassociate
+
+    def pose(label, x, y):
+        return SimpleNamespace(label=label, pose=SimpleNamespace(x=x, y=y))
+
+    ids, labels, last = [4, 1, 3], ["bracket", "washer", "washer"], [(0.02, 0.0), (0.0, 0.0), (0.03, 0.03)]
+    by_id = {4: pose("bracket", 0.02, 0.0), 6: pose("washer", 0.031, 0.029), 7: pose("tile", 0.0, 0.001),
+             8: pose("washer", 0.06, 0.0)}
+    reassociate(ids, labels, last, by_id)
+    assert ids == [4, 1, 6]  # row 1: no washer within 20 mm (the tile does not count); row 2: track 6

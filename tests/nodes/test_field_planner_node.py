@@ -147,3 +147,67 @@ def test_a_sensorless_move_part_positions_a_part_no_camera_sees(ros):
     final = dyn.state.configurations[0]
     assert math.hypot(final[0] - 0.01, final[1] + 0.015) <= 1e-3
     assert len(goals) == 1 and {f.feedback.phase for f in feedback} == {"positioning", "done"}
+
+
+def test_move_parts_brings_two_parts_to_their_own_goals_and_rejects_colliding_goals(ros):
+    from geometry_msgs.msg import Pose2D
+    from ppod_msgs.action import MoveParts
+    from ppod_msgs.msg import PartPose, PartPoseArray
+    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+    from rclpy.action import ActionClient
+
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.convert import motion_from_msg, seconds_to_stamp
+    from ppod_nodes.field_planner import FieldPlannerNode
+    from ppod_ros.motion import PlateMotion
+    from ppod_ros.parts import Footprint, PointPart
+    from ppod_ros.physics import PartDynamics
+
+    _active(ros, ros.make(FieldPlannerNode))
+    goals = ros.collect(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+    poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
+    washer = PointPart(mu=0.3, footprint=Footprint.from_value({"disk": 0.006}))
+    dyn = PartDynamics([washer, washer], np.array([[-0.04, 0.035, 0.0], [0.045, 0.02, 0.0]]))
+    t = [0.0]
+
+    def publish() -> None:
+        s = dyn.state
+        msg = PartPoseArray()
+        msg.header.stamp = seconds_to_stamp(t[0])
+        for i, pid in enumerate((7, 9)):
+            p = PartPose(id=pid, label="washer", status=PartPose.STATUS_TRACKED)
+            p.pose.x, p.pose.y = float(s.configurations[i, 0]), float(s.configurations[i, 1])
+            p.stamp = msg.header.stamp
+            msg.parts.append(p)
+        poses_pub.publish(msg)
+
+    for _ in range(5):
+        publish()
+        ros.wait_until(lambda: False, 0.05)
+    client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
+    assert client.wait_for_server(timeout_sec=10)
+    clash = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=0.0, y=0.0), Pose2D(x=0.004, y=0.0)])
+    assert not ros.wait_future(client.send_goal_async(clash), 10, "goal").accepted  # footprints overlap
+    untracked = MoveParts.Goal(part_ids=[7, 99], targets=[Pose2D(x=0.0, y=0.0), Pose2D(x=0.03, y=0.0)])
+    assert not ros.wait_future(client.send_goal_async(untracked), 10, "goal").accepted
+    goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
+                          position_tolerance_m=[2e-3, 2e-3], timeout_s=50.0)
+    feedback = []
+    handle = ros.wait_future(client.send_goal_async(goal, feedback_callback=feedback.append), 10, "goal")
+    assert handle.accepted
+    result = handle.get_result_async()
+    while not result.done() and t[0] < 55.0:
+        n = len(feedback)
+        motion = motion_from_msg(goals[-1]) if goals else PlateMotion.zero()
+        dyn.advance(motion, t[0], 0.1)
+        t[0] += 0.1
+        publish()
+        ros.wait_until(lambda n=n: len(feedback) > n or result.done(), 5.0)
+    assert result.done(), "MoveParts did not finish within 55 s of device time"
+    res = result.result().result
+    assert res.success, res.reason
+    assert list(res.part_ids) == [7, 9] and all(res.reached) and all(v >= 0 for v in res.time_to_goal_s)
+    final = dyn.state.configurations
+    assert math.hypot(final[0, 0] + 0.02, final[0, 1] - 0.01) <= 2.5e-3
+    assert math.hypot(final[1, 0] - 0.02, final[1, 1] + 0.01) <= 2.5e-3
+    assert feedback and list(feedback[-1].feedback.part_ids) == [7, 9]

@@ -17,3 +17,17 @@ def test_the_benchmark_runs_sensorless_and_physics_sections(tmp_path, capsys):
     assert [r["on_plate"] for r in result["physics"]] == [10, 10]
     assert all(r["device_s"] == 5.0 and r["real_time_factor"] > 0 for r in result["physics"])
     assert (tmp_path / "planner.png").stat().st_size > 1000
+
+
+def test_the_multipart_section_runs_both_planners_on_the_same_scenes(tmp_path, capsys):
+    args = argparse.Namespace(sections=["multipart"], quick=True, seed=0, out=str(tmp_path), counts=[1], scenes=1,
+                              scene_seconds=15.0)
+    assert bench.run(args) == 0
+    out = capsys.readouterr().out
+    assert "multipart 1, mpc" in out and "multipart 1, template" in out
+    rows = json.loads((tmp_path / "planner.json").read_text())["multipart"]
+    assert [r["planner"] for r in rows] == ["mpc", "template"]
+    mpc = rows[0]
+    assert mpc["count"] == 1 and len(mpc["parts"]) == 1 and 0.2 <= mpc["parts"][0]["mu"] <= 0.45
+    assert len(mpc["switch_deviation_mm"]) == 1 and mpc["device_s"] <= 16.0
+    assert all(t > 0 for t in mpc["plan_ms"])

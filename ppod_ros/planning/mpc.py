@@ -1,0 +1,690 @@
+"""Model-predictive manipulation: several parts, each to its own goal pose, at once.
+
+At each replanning step (every ``replan_period_s`` of device time, camera poses in between) the
+planner chooses the plate motion itself, not a field kind:
+
+  predict   each commanded part's asymptotic velocity (point part) or twist (rigid part, x, y and
+            theta) under a candidate motion, at its tracked configuration (planning/predict.py:
+            all candidates in one batched call), times the part's estimated velocity scale,
+            carried over the horizon ``horizon_s``.
+  cost      the distance of each predicted configuration from its waypoint (the goal, or the
+            point ``max_speed_mps * horizon_s`` towards it when it is farther: a reachable goal
+            for the horizon), angles weighted by ``angle_weight_m_per_rad``; parts already within
+            tolerance are asked to stay (weight ``hold_weight``); predicted positions of two parts
+            closer than their footprints plus ``clearance_m`` are penalised; a candidate that
+            loses contact at any commanded part is rejected.
+  search    candidates: the last motion, the plate at rest, the template fields (the sink
+            centred on each goal, a rotation about a rigid part, the orienting motion through its
+            goal; designed once at the centre and moved with exact shifts), then Gauss-Newton
+            steps on the 11 (one frequency) or 23 (two) real inputs from the best of them,
+            with finite-difference Jacobians evaluated in one batched call and a trust region
+            (``max_change``, relative to the typical axis scales) so a switch is a small change:
+            with the generator's ramp and the feedback's predicted first error the parts follow
+            the predicted path instead of being thrown.
+  envelope  the chosen motion is scaled down until the generator's own checker accepts it with
+            ``headroom`` under every limit (planning/envelope.py).
+  switch    the new motion is sent only if it beats the current one by ``switch_gain`` (each
+            switch restarts the feedback's learning).
+  estimate  between replanning steps each moving part's displacement is compared with the
+            predicted one: the velocity scale (friction and plant error the model does not know)
+            is the least-squares ratio, smoothed (``scale_gain``), within ``scale_range``.
+  finish    a part within tolerance is asked to stay; when every commanded part is within
+            tolerance the plate is stopped (a plate at rest holds every part); done when all
+            have stayed within tolerance for ``settle_s``.
+
+Nothing here imports rclpy or message types.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ppod_ros.errors import ConfigError
+from ppod_ros.motion import PlateMotion
+from ppod_ros.parts import PointPart, RigidPart
+from ppod_ros.planning.design import _SCALE, DEFAULT_FREQUENCY_HZ, design_field, orient_phasors
+from ppod_ros.planning.envelope import fit_envelope
+from ppod_ros.planning.predict import predict_velocities
+from ppod_ros.planning.specs import CENTRE_RADIUS_M, FieldSpec
+
+
+@dataclass(frozen=True)
+class MpcSettings:
+    """Tuning constants of the model-predictive planner (units in the names)."""
+
+    replan_period_s: float = 0.5          # device time between replanning steps (>= 2 Hz)
+    horizon_s: float = 1.0                # prediction horizon
+    ramp_s: float = 0.5                   # the generator's ramp on a switch (device default_ramp_s)
+    approach_per_s: float = 0.8           # waypoint: this fraction of the error per horizon second
+    frequency_hz: float = DEFAULT_FREQUENCY_HZ  # of the searched motions
+    harmonics: int = 1                    # 1: 11 real inputs; 2: 23
+    headroom: float = 0.15                # fraction under every device limit
+    max_speed_mps: float = 0.008          # waypoint distance per horizon second
+    max_turn_radps: float = 0.5           # angular waypoint per horizon second
+    angle_weight_m_per_rad: float = 0.03  # an angle error of 1 rad costs as much as 30 mm
+    hold_weight: float = 3.0              # parts within tolerance: weight of staying put
+    hold_release: float = 1.5             # ... until out by this many tolerances (hysteresis)
+    region_radius_m: float = 0.065        # predicted positions beyond this (and beyond the part's own) rule
+                                          # a candidate out: parts are never driven off the working disc
+    clearance_m: float = 0.002            # predicted footprints closer than this are penalised
+    collision_weight: float = 5.0
+    gauss_newton_steps: int = 2
+    fd_step: float = 0.03                 # finite-difference step, relative to the axis scales
+    max_change: float = 0.6               # trust region per step, relative to the axis scales
+    min_amplitude: float = 0.8            # searched motions keep at least this fraction of the template
+                                          # sink's amplitude (relative to the axis scales): weak motions
+                                          # let parts of unknown, higher friction stick
+    min_dwell_s: float = 1.0              # at least this long between switches (except to stop the plate):
+                                          # each new motion starts with the feedback's first error
+    near_m: float = 0.004                 # every moving part this close: the endgame
+    near_dwell_s: float = 2.0             # ... where switches wait longer (the first error decays)
+    switch_gain: float = 0.2              # a new motion must lower the cost by this fraction
+    scale_gain: float = 0.6               # smoothing of the velocity-scale estimate per step
+    scale_range: tuple[float, float] = (0.4, 4.0)
+    min_predicted_m: float = 1e-3         # predicted displacements shorter than this teach nothing
+    stall_s: float = 4.0                  # no 10 % progress over this long: focus on one part ("alternate
+    focus_s: float = 3.0                  # motions") for this long, the others' weights times
+    focus_others: float = 0.2             # this (a linear field cannot serve every part at once)
+    stop_within: float = 0.6              # the plate stops when every part is within this fraction of its
+                                          # tolerances (tracker noise must not flip a part back out)
+    settle_s: float = 0.5                 # within tolerance for this long: reached
+    lost_after_s: float = 6.0             # a commanded part unseen this long: failed (touching parts
+                                          # are lost by the tracker for a while)
+    template_sink_gain_per_s: float = 0.3
+    template_turn_radps: float = 0.3
+
+    def __post_init__(self):
+        for name in ("replan_period_s", "horizon_s", "frequency_hz", "max_speed_mps", "max_turn_radps",
+                     "fd_step", "max_change", "settle_s", "lost_after_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ConfigError(f"{name}: must be > 0, got {v!r}")
+        if self.replan_period_s > 0.5:
+            raise ConfigError(f"replan_period_s: must be <= 0.5 s (replanning at >= 2 Hz), got {self.replan_period_s}")
+        if self.harmonics not in (1, 2):
+            raise ConfigError(f"harmonics: expected 1 or 2, got {self.harmonics!r}")
+        if not 0.0 <= self.headroom < 0.5:
+            raise ConfigError(f"headroom: expected 0..0.5 (fraction), got {self.headroom!r}")
+
+
+@dataclass(frozen=True)
+class PartGoal:
+    """One commanded part: its row in the poses, goal (x, y in m; theta in rad or None) and tolerances."""
+
+    index: int
+    x_m: float
+    y_m: float
+    theta_rad: float | None = None
+    position_tol_m: float = 1e-3
+    angle_tol_rad: float = math.radians(2.0)
+
+
+@dataclass(frozen=True)
+class PartStatus:
+    index: int
+    position_error_m: float
+    angle_error_rad: float | None
+    within: bool
+    reached: bool
+    time_to_goal_s: float | None
+    velocity_scale: float
+
+
+@dataclass(frozen=True)
+class MultiStep:
+    """What :meth:`MultiTask.step` returns (the fields of TaskStep, plus one status per goal)."""
+
+    motion: PlateMotion | None          # None: keep the current motion
+    phase: str
+    done: bool
+    failed_reason: str | None
+    position_error_m: float             # the largest over the goals
+    angle_error_rad: float | None       # the largest over the oriented goals
+    text: str
+    parts: tuple[PartStatus, ...] = ()
+    plan_ms: float = 0.0                # wall time of this step's planning (0 between replanning steps)
+
+
+def _wrap(a, period: float = 2 * math.pi):
+    return (np.asarray(a) + period / 2) % period - period / 2
+
+
+def part_radius_m(part: PointPart | RigidPart) -> float:
+    """Radius of the part's footprint about its pose point (3 mm when none is given)."""
+    fp = getattr(part, "footprint", None)
+    if isinstance(part, RigidPart):
+        return float(np.max(np.hypot(*part.outline().T)))
+    if fp is None:
+        return 0.003
+    return float(fp.size[0]) if fp.kind == "disk" else float(np.max(np.hypot(*fp.outline().T)))
+
+
+def _symmetry(part) -> float:
+    fp = getattr(part, "footprint", None)
+    s = fp.symmetry_rad if fp is not None else 2 * math.pi
+    return s if s > 0 else 2 * math.pi
+
+
+def check_goals(parts: Sequence[PointPart | RigidPart], goals: Sequence[PartGoal], *,
+                clearance_m: float = 0.002) -> None:
+    """ConfigError with the reason for goals out of the working region, repeated, or colliding."""
+    if not goals:
+        raise ConfigError("goals: expected at least one (part, goal pose) pair")
+    seen = set()
+    for g in goals:
+        if not 0 <= g.index < len(parts):
+            raise ConfigError(f"goals: part index {g.index} outside 0..{len(parts) - 1}")
+        if g.index in seen:
+            raise ConfigError(f"goals: part {g.index} is given two goals")
+        seen.add(g.index)
+        vals = (g.x_m, g.y_m) + (() if g.theta_rad is None else (g.theta_rad,))
+        if not all(math.isfinite(v) for v in vals):
+            raise ConfigError(f"goals: part {g.index}: goal must be finite, got {vals}")
+        r = math.hypot(g.x_m, g.y_m)
+        if r + part_radius_m(parts[g.index]) > CENTRE_RADIUS_M + 0.005:
+            raise ConfigError(f"goals: part {g.index}: ({g.x_m:g}, {g.y_m:g}) m is outside the working region "
+                              f"(its footprint must fit within {CENTRE_RADIUS_M + 0.005:g} m of the centre)")
+        for name, v in (("position_tol_m", g.position_tol_m), ("angle_tol_rad", g.angle_tol_rad)):
+            if not (math.isfinite(v) and v > 0):
+                raise ConfigError(f"goals: part {g.index}: {name} must be > 0, got {v!r}")
+    for a in range(len(goals)):
+        for b in range(a + 1, len(goals)):
+            ga, gb = goals[a], goals[b]
+            d = math.hypot(ga.x_m - gb.x_m, ga.y_m - gb.y_m)
+            need = part_radius_m(parts[ga.index]) + part_radius_m(parts[gb.index]) + clearance_m
+            if d < need:
+                raise ConfigError(f"goals: parts {ga.index} and {gb.index} would collide at their goals "
+                                  f"({1e3 * d:.1f} mm apart, their footprints need {1e3 * need:.1f} mm)")
+
+
+# ---------------------------------------------------------------------------------- parametrisation
+def _to_vector(motion: PlateMotion, harmonics: int) -> np.ndarray:
+    """Real inputs (12 per harmonic, no gauge fixing: the trust region keeps steps small)."""
+    table = motion.phasor_table(harmonics)[:harmonics] / _SCALE
+    z = table.reshape(-1)
+    return np.concatenate([z.real, z.imag])
+
+
+def _to_motion(v: np.ndarray, frequency_hz: float, harmonics: int, name: str = "mpc") -> PlateMotion:
+    n = 6 * harmonics
+    table = ((v[:n] + 1j * v[n:]).reshape(harmonics, 6)) * _SCALE
+    return PlateMotion.from_phasors(frequency_hz, np.arange(1, harmonics + 1), table, name=name)
+
+
+def base_design(kind: str, device, settings: MpcSettings | None = None) -> PlateMotion:
+    """The template sink or rotation designed at the plate centre (cached by design_field: call
+    it once at start-up, e.g. when a node configures, so the first replanning step does not pay
+    the design, about a second each)."""
+    s = settings or MpcSettings()
+    if kind == "sink":
+        spec = FieldSpec.from_request("sink", [0.0, 0.0, s.template_sink_gain_per_s])
+    elif kind == "rotation":
+        spec = FieldSpec.from_request("rotation", [0.0, 0.0, s.template_turn_radps])
+    else:
+        raise ConfigError(f"kind: expected 'sink' or 'rotation', got {kind!r}")
+    return design_field(spec, device=device).motion
+
+
+# The template fields, by kind: one table (an unknown kind raises). Each builds a motion from
+# (planner, goal, pose); the designs are made once at the centre and moved with exact shifts.
+def _template_sink(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion:
+    X = planner._base("sink").phasor_table(1).copy()
+    X[:, 2] += X[:, 4] * goal.x_m - X[:, 3] * goal.y_m
+    return PlateMotion.from_phasors(planner._base("sink").frequency_hz, [1], X, name=f"sink@{goal.index}")
+
+
+def _template_rotation(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion | None:
+    if goal.theta_rad is None:
+        return None
+    ang = float(_wrap(pose[2] - goal.theta_rad, planner.symmetry[goal.index]))
+    base = planner._base("rotation")
+    X = base.phasor_table(1).copy() * (1.0 if ang < 0 else -1.0)
+    x0, y0 = float(pose[0]), float(pose[1])
+    X[:, 0] += X[:, 5] * y0
+    X[:, 1] -= X[:, 5] * x0
+    X[:, 2] += X[:, 4] * x0 - X[:, 3] * y0
+    return PlateMotion.from_phasors(base.frequency_hz, [1], X, name=f"turn@{goal.index}")
+
+
+def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion | None:
+    if goal.theta_rad is None:
+        return None
+    from ppod_ros.planning.design import ORIENT_FREQUENCY_HZ
+
+    X = orient_phasors(goal.x_m, goal.y_m, goal.theta_rad)
+    return PlateMotion.from_phasors(ORIENT_FREQUENCY_HZ, [1], X[None], name=f"orient@{goal.index}")
+
+
+TEMPLATES: dict[str, Callable] = {"sink": _template_sink, "rotation": _template_rotation,
+                                  "orient": _template_orient}
+
+
+def template_motion(kind: str, planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion | None:
+    """The template field ``kind`` for ``goal`` from ``pose``; ConfigError for an unknown kind."""
+    try:
+        build = TEMPLATES[kind]
+    except KeyError:
+        raise ConfigError(f"kind: unknown template field {kind!r}; expected one of {', '.join(TEMPLATES)}") from None
+    return build(planner, goal, pose)
+
+
+# ---------------------------------------------------------------------------------- the planner
+@dataclass
+class _Tracked:
+    holding: bool = False
+    in_tol_since: float | None = None
+    time_to_goal_s: float | None = None
+    scale: float = 1.0
+    last_seen: float | None = None
+
+
+@dataclass
+class _Segment:
+    t_s: float
+    poses: np.ndarray            # (N, 3) at the start of the segment
+    velocity: np.ndarray         # (G, 3) model velocity (unscaled) per goal at the start
+    previous: np.ndarray         # (G, 3) the same under the motion before the switch
+    motion_key: bytes = b""
+    unseen: frozenset = frozenset()  # rows planned at their last seen pose
+
+
+def ramped_displacement(v_old: np.ndarray, v_new: np.ndarray, t_s: float, ramp_s: float) -> np.ndarray:
+    """Displacement over ``t_s`` after a switch from v_old to v_new, the velocity crossfaded
+    linearly over ``ramp_s`` (the generator's ramp)."""
+    if ramp_s <= 0:
+        return v_new * t_s
+    if t_s >= ramp_s:
+        return v_old * (0.5 * ramp_s) + v_new * (t_s - 0.5 * ramp_s)
+    return v_old * t_s + (v_new - v_old) * (t_s * t_s / (2.0 * ramp_s))
+
+
+class MultiTask:
+    """Move ``parts[g.index]`` to each goal g at once (see the module docstring).
+
+    ``parts`` are the planner's models of every tracked part (rows of the poses); ``goals`` the
+    commanded ones. ``keep_clear``: the uncommanded parts enter the collision penalty too.
+    """
+
+    def __init__(self, parts: Sequence[PointPart | RigidPart], goals: Sequence[PartGoal], *, device=None,
+                 settings: MpcSettings | None = None, timeout_s: float = 60.0, keep_clear: bool = False):
+        from ppod_ros.device import default_device_config
+
+        self.parts = list(parts)
+        if not self.parts:
+            raise ConfigError("parts: expected at least one part")
+        self.settings = settings or MpcSettings()
+        if not isinstance(self.settings, MpcSettings):
+            raise ConfigError(f"settings: expected MpcSettings, got {type(self.settings).__name__}")
+        self.goals = list(goals)
+        check_goals(self.parts, self.goals, clearance_m=self.settings.clearance_m)
+        if not (math.isfinite(timeout_s) and timeout_s > 0):
+            raise ConfigError(f"timeout_s: must be > 0, got {timeout_s!r}")
+        self.device = device or default_device_config()
+        self.timeout = float(timeout_s)
+        self.keep_clear = bool(keep_clear)
+        self.symmetry = {g.index: _symmetry(self.parts[g.index]) for g in self.goals}
+        self.radius = np.array([part_radius_m(p) for p in self.parts])
+        self.state = {g.index: _Tracked() for g in self.goals}
+        self.t0: float | None = None
+        self.t_plan = -math.inf
+        self.t_switch = -math.inf
+        self.current = PlateMotion.zero(self.settings.frequency_hz)
+        self.segment: _Segment | None = None
+        self.finished: MultiStep | None = None
+        self.phase = "planning"
+        self.plan_times_ms: list[float] = []
+        self.last_pose: dict[int, np.ndarray] = {}
+        self.progress: list[tuple[float, float]] = []
+        self.focus: int | None = None
+        self.focus_since = -math.inf
+        self.unseen: set[int] = set()
+        self.switches = 0
+        self.last_prediction: dict | None = None   # {"t_s", "motion", "poses", "velocity" (G, 3) scaled}
+        self._bases: dict[str, PlateMotion] = {}
+
+    # ------------------------------------------------------------------ templates
+    def _base(self, kind: str) -> PlateMotion:
+        if kind not in self._bases:
+            self._bases[kind] = base_design(kind, self.device, self.settings)
+        return self._bases[kind]
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, t_s: float, poses) -> MultiStep:
+        """One camera frame: ``poses`` (N, 3) [x, y, theta] in the plate frame, NaN rows unseen."""
+        if self.finished is not None:
+            return self.finished
+        poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+        if poses.shape[0] != len(self.parts):
+            raise ConfigError(f"poses: expected {len(self.parts)} rows, got {poses.shape[0]}")
+        if self.t0 is None:
+            self.t0 = t_s
+        elapsed = t_s - self.t0
+        statuses = self._statuses(t_s, poses)
+        lost = self.settings.lost_after_s
+        missing = [g.index for g in self.goals
+                   if self.state[g.index].last_seen is None or t_s - self.state[g.index].last_seen > lost]
+        if missing and elapsed > self.settings.lost_after_s:
+            return self._end(statuses, f"part {missing[0]} not seen for over {self.settings.lost_after_s:g} s")
+        if all(s.reached for s in statuses):
+            return self._end(statuses, None, elapsed)
+        if elapsed > self.timeout:
+            n_ok = sum(s.reached for s in statuses)
+            return self._end(statuses, f"timeout after {elapsed:.1f} s: {n_ok} of {len(statuses)} parts reached")
+        motion, plan_ms = None, 0.0
+        if t_s - self.t_plan >= self.settings.replan_period_s - 1e-9:
+            rows = [g.index for g in self.goals]
+            seen = np.all(np.isfinite(poses[rows, :2]), axis=1)
+            for row, ok in zip(rows, seen):
+                if ok:
+                    self.last_pose[row] = poses[row]
+            if seen.any() and all(row in self.last_pose for row in rows):
+                # An unseen commanded part is planned at its last pose with no weight (not steered).
+                self.unseen = {row for row, ok in zip(rows, seen) if not ok}
+                poses = poses.copy()
+                for row in self.unseen:
+                    poses[row] = self.last_pose[row]
+                w0 = time.perf_counter()
+                self._estimate(t_s, poses)
+                motion = self._plan(t_s, poses, statuses)
+                plan_ms = 1e3 * (time.perf_counter() - w0)
+                self.plan_times_ms.append(plan_ms)
+                self.t_plan = t_s
+        return MultiStep(motion, self.phase, False, None, *self._worst(statuses), self._text(statuses),
+                         tuple(statuses), plan_ms)
+
+    def _statuses(self, t_s: float, poses: np.ndarray) -> list[PartStatus]:
+        out = []
+        for g in self.goals:
+            st, p = self.state[g.index], poses[g.index]
+            if not np.all(np.isfinite(p[:2])):
+                out.append(PartStatus(g.index, math.nan, None, False, False, st.time_to_goal_s, st.scale))
+                continue
+            st.last_seen = t_s
+            dist = math.hypot(p[0] - g.x_m, p[1] - g.y_m)
+            ang = None if g.theta_rad is None else float(_wrap(p[2] - g.theta_rad, self.symmetry[g.index]))
+            within = dist <= g.position_tol_m and (ang is None or abs(ang) <= g.angle_tol_rad)
+            if within:
+                if st.in_tol_since is None:
+                    st.in_tol_since = t_s
+                    st.time_to_goal_s = t_s - self.t0
+            else:
+                st.in_tol_since, st.time_to_goal_s = None, None
+            reached = within and t_s - st.in_tol_since >= self.settings.settle_s
+            out.append(PartStatus(g.index, dist, ang, within, reached, st.time_to_goal_s, st.scale))
+        return out
+
+    # ------------------------------------------------------------------ estimation
+    def _estimate(self, t_s: float, poses: np.ndarray) -> None:
+        """Velocity scale per commanded part from the last segment's displacement vs the prediction."""
+        seg, s = self.segment, self.settings
+        if seg is None or seg.motion_key != self.current.key:
+            return
+        dt = t_s - seg.t_s
+        disp = ramped_displacement(seg.previous, seg.velocity, dt, self.settings.ramp_s)
+        for k, g in enumerate(self.goals):
+            if g.index in self.unseen or g.index in seg.unseen:
+                continue
+            pred = disp[k, :2]
+            d = poses[g.index, :2] - seg.poses[g.index, :2]
+            n2 = float(pred @ pred)
+            if not np.all(np.isfinite(d)) or n2 < s.min_predicted_m ** 2:
+                continue
+            ratio = float(np.clip((d @ pred) / n2, *s.scale_range))
+            st = self.state[g.index]
+            st.scale = float(np.clip(st.scale + s.scale_gain * (ratio - st.scale), *s.scale_range))
+
+    # ------------------------------------------------------------------ planning
+    def _plan(self, t_s: float, poses: np.ndarray, statuses: list[PartStatus]) -> PlateMotion | None:
+        s = self.settings
+        def well_within(g: PartGoal, st: PartStatus) -> bool:
+            f = s.stop_within
+            return st.position_error_m <= f * g.position_tol_m and (
+                st.angle_error_rad is None or abs(st.angle_error_rad) <= f * g.angle_tol_rad)
+
+        if all(well_within(g, st) for g, st in zip(self.goals, statuses)):
+            # Every commanded part is well there: stop the plate (at rest, it holds every part).
+            self.phase = "holding"
+            target = PlateMotion.zero(self.current.frequency_hz, name="rest")
+            self._v_current = np.zeros((len(self.goals), 3))
+            _c, self._v_current = self._costs([self.current], poses, statuses)
+            self._v_current = self._v_current[0]
+            return self._switch(t_s, poses, target, np.zeros((len(self.goals), 3)))
+        self.phase = "moving"
+        self._update_focus(t_s, statuses)
+        self._v_current = np.zeros((len(self.goals), 3))
+        _c, v_cur = self._costs([self.current], poses, statuses)
+        self._v_current = v_cur[0]
+        current_cost, current_vel = self._costs([self.current], poses, statuses)
+        candidates = [PlateMotion.zero(s.frequency_hz, name="rest")]
+        for g in self.goals:
+            for kind in TEMPLATES:
+                m = template_motion(kind, self, g, poses[g.index])
+                if m is not None:
+                    candidates.append(m)
+        costs, vels = self._costs(candidates, poses, statuses)
+        costs = np.concatenate([current_cost, costs])
+        pool = [self.current] + candidates
+        best = int(np.argmin(costs))
+        best_motion, best_cost = pool[best], float(costs[best])
+        # Gauss-Newton from the best start at its frequency (templates at another frequency only
+        # compete as they are).
+        start = best_motion if not best_motion.is_zero() else candidates[1]
+        refined, refined_cost = self._refine(start, poses, statuses)
+        if refined is not None and refined_cost < best_cost:
+            best_motion, best_cost = refined, refined_cost
+        best_motion, _scale = fit_envelope(best_motion, self.device, s.headroom)
+        final_cost, final_vel = self._costs([best_motion], poses, statuses)
+        if not math.isfinite(float(final_cost[0])):
+            if not math.isfinite(float(current_cost[0])):  # nothing safe found: stop the plate
+                rest = PlateMotion.zero(self.current.frequency_hz, name="rest")
+                return self._switch(t_s, poses, rest, np.zeros((len(self.goals), 3)))
+            return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
+        near = all(st.position_error_m <= s.near_m for st in statuses)
+        dwelt = t_s - self.t_switch >= (s.near_dwell_s if near else s.min_dwell_s) - 1e-9
+        if dwelt and float(final_cost[0]) < (1.0 - s.switch_gain) * float(current_cost[0]):
+            return self._switch(t_s, poses, best_motion, final_vel[0])
+        return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
+
+    def _update_focus(self, t_s: float, statuses: list[PartStatus]) -> None:
+        s = self.settings
+        metric = sum(0.0 if st.within else st.position_error_m
+                     + s.angle_weight_m_per_rad * abs(st.angle_error_rad or 0.0)
+                     for st in statuses if math.isfinite(st.position_error_m))
+        self.progress.append((t_s, metric))
+        while len(self.progress) > 2 and t_s - self.progress[1][0] >= s.stall_s:
+            self.progress.pop(0)
+        if self.focus is not None:
+            k = next(i for i, g in enumerate(self.goals) if g.index == self.focus)
+            if t_s - self.focus_since >= s.focus_s or statuses[k].within:
+                self.focus, self.progress = None, [(t_s, metric)]
+            return
+        t0, m0 = self.progress[0]
+        unfinished = [(st.position_error_m / g.position_tol_m + (abs(st.angle_error_rad) / g.angle_tol_rad
+                                                                if st.angle_error_rad is not None else 0.0), g.index)
+                      for g, st in zip(self.goals, statuses) if not st.within and math.isfinite(st.position_error_m)]
+        if len(self.goals) > 1 and unfinished and t_s - t0 >= s.stall_s and metric > 0.9 * m0:
+            self.focus, self.focus_since = max(unfinished)[1], t_s
+
+    def _switch(self, t_s, poses, motion, velocity, keep: bool = False) -> PlateMotion | None:
+        changed = motion.key != self.current.key
+        if changed:
+            self.switches += 1
+            self.t_switch = t_s
+        self.current = motion
+        previous = np.nan_to_num(velocity) if keep else self._v_current
+        self.segment = _Segment(t_s, poses.copy(), np.nan_to_num(velocity), previous, motion.key,
+                                frozenset(self.unseen))
+        scales = np.array([self.state[g.index].scale for g in self.goals])
+        self.last_prediction = {"t_s": t_s, "motion": motion, "poses": poses.copy(), "switched": changed,
+                                "velocity": np.nan_to_num(velocity) * scales[:, None],
+                                "previous": previous * scales[:, None], "ramp_s": self.settings.ramp_s}
+        return motion if changed else None
+
+    def _waypoints(self, poses: np.ndarray, statuses: list[PartStatus]) -> tuple[np.ndarray, np.ndarray]:
+        """Per goal: the target configuration after the horizon (G, 3) and the weights (G,)."""
+        s, H = self.settings, self.settings.horizon_s
+        way = np.zeros((len(self.goals), 3))
+        weight = np.ones(len(self.goals))
+        for k, (g, st) in enumerate(zip(self.goals, statuses)):
+            p = poses[g.index]
+            e = np.array([g.x_m - p[0], g.y_m - p[1]])
+            d = float(np.hypot(*e))
+            step = min(1.0, s.approach_per_s * H, s.max_speed_mps * H / d) if d > 0 else 0.0
+            way[k, :2] = p[:2] + step * e
+            if g.theta_rad is not None:
+                a = -float(_wrap(p[2] - g.theta_rad, self.symmetry[g.index]))
+                lim = min(s.max_turn_radps * H, s.approach_per_s * H * abs(a))
+                way[k, 2] = p[2] + float(np.clip(a, -lim, lim))
+            else:
+                way[k, 2] = p[2]
+            tr = self.state[g.index]
+            out = st.position_error_m > s.hold_release * g.position_tol_m or (
+                st.angle_error_rad is not None and abs(st.angle_error_rad) > s.hold_release * g.angle_tol_rad)
+            tr.holding = st.within or (tr.holding and not out)
+            if tr.holding:
+                way[k] = p
+                weight[k] = s.hold_weight
+            if self.focus is not None and g.index != self.focus:
+                weight[k] *= s.focus_others
+            if g.index in self.unseen:  # not seen: asked to stay where it was last seen
+                way[k] = self.last_pose[g.index]
+                weight[k] = s.hold_weight
+        return way, weight
+
+    def _costs(self, motions: Sequence[PlateMotion], poses: np.ndarray, statuses: list[PartStatus]
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Cost (M,) (inf where contact is lost at a commanded part) and model velocities (M, G, 3)."""
+        r, vel, ok = self._residuals(motions, poses, statuses)
+        cost = np.sum(r ** 2, axis=1)
+        cost[~ok] = np.inf
+        # Never drive a part out of the working disc: a predicted position beyond it (and beyond
+        # where the part already is) rules the candidate out.
+        cur = np.array([poses[g.index, :2] for g in self.goals])
+        r_now = np.hypot(cur[:, 0], cur[:, 1])
+        v_cur = getattr(self, "_v_current", None)
+        v_cur = np.zeros_like(vel[0]) if v_cur is None else v_cur
+        scales = np.array([self.state[g.index].scale for g in self.goals])
+        H, ramp = self.settings.horizon_s, min(self.settings.ramp_s, self.settings.horizon_s)
+        pred = cur[None] + scales[None, :, None] * (v_cur[None, :, :2] * (0.5 * ramp) + vel[..., :2] * (H - 0.5 * ramp))
+        r_pred = np.hypot(pred[..., 0], pred[..., 1])
+        out = np.any(r_pred > np.maximum(r_now, self.settings.region_radius_m)[None], axis=1)
+        cost[out] = np.inf
+        return cost, vel
+
+    def _residuals(self, motions, poses, statuses):
+        s, H = self.settings, self.settings.horizon_s
+        M, G = len(motions), len(self.goals)
+        vel = np.zeros((M, G, 3))
+        ok = np.ones(M, bool)
+        for k, g in enumerate(self.goals):
+            part = self.parts[g.index]
+            if isinstance(part, RigidPart):
+                v, valid = predict_velocities(motions, part, poses[g.index][None, :])
+                vel[:, k, :] = v[:, 0, :]
+            else:
+                v, valid = predict_velocities(motions, part, poses[g.index][None, :2])
+                vel[:, k, :2] = v[:, 0, :]
+            ok &= valid[:, 0]
+        vel = np.nan_to_num(vel)
+        scales = np.array([self.state[g.index].scale for g in self.goals])
+        way, weight = self._waypoints(poses, statuses)
+        cur = np.array([poses[g.index] for g in self.goals])
+        v_cur = getattr(self, "_v_current", None)
+        v_cur = np.zeros((G, 3)) if v_cur is None else v_cur
+        r = min(s.ramp_s, H)
+        pred = cur[None] + scales[None, :, None] * (v_cur[None] * (0.5 * r) + vel * (H - 0.5 * r))  # (M, G, 3)
+        res_xy = (pred[..., :2] - way[None, :, :2]) * weight[None, :, None]
+        oriented = np.array([g.theta_rad is not None for g in self.goals], float)
+        res_th = (pred[..., 2] - way[None, :, 2]) * s.angle_weight_m_per_rad * oriented[None] * weight[None]
+        parts = [res_xy.reshape(M, -1), res_th]
+        # Collisions between predicted positions (commanded parts, and the others if asked).
+        idx = [g.index for g in self.goals]
+        others = [i for i in range(len(self.parts)) if i not in idx and np.all(np.isfinite(poses[i, :2]))] \
+            if self.keep_clear else []
+        centres = np.concatenate([pred[..., :2], np.broadcast_to(poses[others, :2], (M, len(others), 2))], axis=1)
+        radii = np.concatenate([self.radius[idx], self.radius[others]])
+        pen = []
+        n = centres.shape[1]
+        for a in range(G):
+            for b in range(a + 1, n):
+                d = np.hypot(*(centres[:, a] - centres[:, b]).T)
+                pen.append(np.maximum(0.0, radii[a] + radii[b] + s.clearance_m - d) * s.collision_weight)
+        if pen:
+            parts.append(np.stack(pen, axis=1))
+        return np.concatenate(parts, axis=1) / s.max_speed_mps, vel, ok
+
+    def _refine(self, start: PlateMotion, poses, statuses) -> tuple[PlateMotion | None, float]:
+        s = self.settings
+        freq = start.frequency_hz
+        harmonics = s.harmonics
+        v = _to_vector(start, harmonics)
+        best_cost = float(self._costs([start], poses, statuses)[0][0])
+        best = start
+        n = v.size
+        for _ in range(s.gauss_newton_steps):
+            probes = [_to_motion(v, freq, harmonics)] + [_to_motion(v + s.fd_step * np.eye(n)[j], freq, harmonics)
+                                                         for j in range(n)]
+            r, _vel, ok = self._residuals(probes, poses, statuses)
+            if not ok[0]:
+                break
+            J = (r[1:] - r[0]).T / s.fd_step                    # (R, n)
+            J[:, ~ok[1:]] = 0.0
+            lam = 1e-3 * float(np.trace(J.T @ J)) / n + 1e-12
+            dv = -np.linalg.solve(J.T @ J + lam * np.eye(n), J.T @ r[0])
+            norm = float(np.linalg.norm(dv))
+            if norm > s.max_change:
+                dv *= s.max_change / norm
+            floor = s.min_amplitude * float(np.linalg.norm(_to_vector(self._base("sink"), 1)))
+            trials = []
+            for a in (1.0, 0.5, 0.25):
+                vt = v + a * dv
+                norm_t = float(np.linalg.norm(vt))
+                if 0 < norm_t < floor:
+                    vt = vt * (floor / norm_t)
+                trials.append(_to_motion(vt, freq, harmonics, name="mpc"))
+            trials = [fit_envelope(m, self.device, s.headroom)[0] for m in trials]
+            costs, _ = self._costs(trials, poses, statuses)
+            j = int(np.argmin(costs))
+            if not costs[j] < best_cost:
+                break
+            best, best_cost = trials[j], float(costs[j])
+            v = _to_vector(best, harmonics)
+        return (best if best is not start else None), best_cost
+
+    # ------------------------------------------------------------------ reporting
+    def _worst(self, statuses) -> tuple[float, float | None]:
+        d = [st.position_error_m for st in statuses if math.isfinite(st.position_error_m)]
+        a = [abs(st.angle_error_rad) for st in statuses if st.angle_error_rad is not None]
+        return (max(d) if d else math.nan), (max(a) if a else None)
+
+    def _text(self, statuses) -> str:
+        bits = []
+        for st in statuses:
+            b = f"#{st.index} {1e3 * st.position_error_m:.1f} mm"
+            if st.angle_error_rad is not None:
+                b += f" {math.degrees(st.angle_error_rad):+.1f} deg"
+            if st.within:
+                b += " ok"
+            bits.append(b)
+        return f"{self.phase}: " + ", ".join(bits)
+
+    def _end(self, statuses, failed: str | None, elapsed: float | None = None) -> MultiStep:
+        d, a = self._worst(statuses)
+        def one(st: PartStatus) -> str:
+            a = "" if st.angle_error_rad is None else f" {math.degrees(abs(st.angle_error_rad)):.2f} deg"
+            return f"#{st.index} {1e3 * st.position_error_m:.2f} mm{a}"
+
+        text = (f"done in {elapsed:.1f} s: " + ", ".join(one(st) for st in statuses)) if failed is None \
+            else f"failed: {failed}"
+        self.finished = MultiStep(None, "failed" if failed else "done", failed is None, failed, d, a, text,
+                                  tuple(statuses))
+        return self.finished
+
+
+__all__ = ["TEMPLATES", "MpcSettings", "MultiStep", "MultiTask", "PartGoal", "PartStatus", "base_design",
+           "check_goals", "part_radius_m", "ramped_displacement", "template_motion"]

@@ -128,6 +128,11 @@ def test_envelope_keeps_headroom_under_every_limit():
     acc, ang = plate_peaks(fitted)
     assert acc <= 0.85 * lim.plate_accel_mps2 + 1e-9 and ang <= 0.85 * lim.plate_angular_accel_radps2 + 1e-9
     assert 9.81 - contact_margin(fitted, lim.working_radius_m) <= 0.85 * (9.81 - lim.contact_margin_mps2) + 1e-9
+    # Every limit of the generator's own checker (stroke, current, voltage, I2t too), not only the plate's.
+    from ppod_ros.actuation.envelope import Envelope
+
+    report = Envelope(device).check_motion(fitted)
+    assert report.within(0.85), report.ratios
     small = big.scaled(0.05)
     assert envelope.fit_envelope(small, device, 0.15) == (small, 1.0)
     with pytest.raises(ConfigError, match="headroom"):

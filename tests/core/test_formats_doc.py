@@ -28,7 +28,8 @@ def _section(prefix: str) -> list[str]:
 
 
 def test_the_page_has_an_example_of_every_format():
-    for prefix, n in (("Plate motion", 1), ("Part", 2), ("Scene", 1), ("Field JSON", 1)):
+    for prefix, n in (("Plate motion", 1), ("Part", 2), ("Scene", 1), ("Field JSON", 1), ("GOALS.yaml", 1),
+                      ("Demo summary", 1)):
         assert len(_section(prefix)) == n, prefix
 
 
@@ -77,3 +78,26 @@ def test_launch_configurations_named_on_the_page_load(path):
     from ppod_nodes.launch.spec import load_launch_spec
 
     assert load_launch_spec(Path(__file__).parents[2] / path).nodes
+
+
+def test_the_goals_example_loads_with_the_planners_parser():
+    from ppod_ros.planning.goals import goals_from_data
+
+    [text] = _section("GOALS.yaml")
+    bracket, second = goals_from_data(yaml.safe_load(text), "docs/formats.md")
+    assert (bracket.part, bracket.theta_deg, bracket.tol_mm, bracket.tol_deg) == ("bracket", 0.0, 1.0, 2.0)
+    assert (second.part, second.theta_deg, second.tol_mm) == (1, None, 2.0)
+
+
+def test_the_summary_example_has_exactly_the_keys_the_demo_writes():
+    from ppod_nodes.cli.demo_multi import summarize
+    from ppod_ros.parts import PointPart
+
+    [text] = _section("Demo summary")
+    doc = json.loads(text)
+    goal = {"index": 0, "label": "washer", "x": 0.0, "y": 0.0, "theta_rad": None, "tol_m": 1e-3, "tol_rad": 0.0}
+    t = np.linspace(0.0, 2.0, 21)
+    written = summarize([goal], [PointPart(0.3)], t, np.zeros((t.size, 1, 3)), 0.0, 2.0, 1.0)
+    assert set(doc) == set(written)
+    assert set(doc["parts"][0]) == set(written["parts"][0])
+    assert written["all_reached"] and written["parts"][0]["time_to_goal_s"] == 0.0

@@ -23,6 +23,7 @@ def test_the_device_plays_a_goal_reports_its_status_and_stops(tmp_path):
     from ppod_nodes.common import qos, topics
     from ppod_nodes.common.convert import motion_to_msg
     from ppod_nodes.common.session import RosSession
+    from ppod_ros.can.protocol import PROTOCOL_VERSION
     from ppod_ros.motion import PlateMotion
 
     with device_stack(tmp_path, [GENERATOR]), RosSession("device_target_test") as ros:
@@ -30,7 +31,7 @@ def test_the_device_plays_a_goal_reports_its_status_and_stops(tmp_path):
         ros.node.create_subscription(PlateMotionStatus, topics.MOTION_STATUS, status.append, qos.LATCHED)
         ros.node.create_subscription(DeviceStatus, topics.DEVICE_STATUS, device.append, qos.STREAM)
         assert ros.wait_until(lambda: len(device) >= 2, 15)
-        assert device[-1].protocol_version >> 8 == 1
+        assert device[-1].protocol_version >> 8 == PROTOCOL_VERSION[0]
         assert (device[-1].bus_load > 0) and not device[-1].faults
         goal = PlateMotion.from_yaml_text(SMALL_GOAL)
         resp = ros.call(SetPlateMotion, "/" + topics.SET_MOTION,

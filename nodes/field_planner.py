@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 from ppod_msgs.action import MovePart, MoveParts
-from ppod_msgs.msg import PartPose, PartPoseArray
+from ppod_msgs.msg import PartPose, PartPoseArray, PlannerProgress
 from ppod_msgs.msg import PlateMotion as PlateMotionMsg
 from ppod_msgs.srv import PlanField
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -125,6 +125,19 @@ def reassociate(ids: list[int], labels: list, last_xy: list, by_id: dict) -> Non
             taken.add(ids[row])
 
 
+def _progress(fb, multi: bool, stamp) -> PlannerProgress:
+    """The action feedback ``fb`` as a PlannerProgress message (the plain, recordable copy)."""
+    msg = PlannerProgress(action="move_parts" if multi else "move_part", phase=fb.phase, text=fb.text)
+    msg.header.stamp = stamp
+    if multi:
+        msg.part_ids, msg.within, msg.velocity_scale = list(fb.part_ids), list(fb.within), list(fb.velocity_scale)
+        msg.position_error_m, msg.orientation_error_rad = list(fb.position_error_m), list(fb.orientation_error_rad)
+        msg.plan_ms = float(fb.plan_ms)
+    else:
+        msg.position_error_m, msg.orientation_error_rad = [fb.position_error_m], [fb.orientation_error_rad]
+    return msg
+
+
 class _RunningTask:
     """The MovePart goal being executed: its handle, the Task, the track ids in Task order."""
 
@@ -167,6 +180,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         self._poses: PartPoseArray | None = None
         self.goal_pub = self.create_lifecycle_publisher(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
         self.target_pub = self.create_publisher(PartPoseArray, topics.MOVE_PART_TARGET, qos.LATCHED)  # drawn by viz
+        self.progress_pub = self.create_publisher(PlannerProgress, topics.PLANNER_PROGRESS, qos.STREAM)
         self.create_service(PlanField, topics.PLAN_FIELD, self._on_plan_field)
         self.create_subscription(PartPoseArray, topics.PART_POSES, self._on_poses, qos.STREAM)
         self._stop_client = self.create_client(Trigger, topics.STOP)
@@ -443,6 +457,7 @@ class FieldPlannerNode(PpodLifecycleNode):
             if pose is not None:
                 fb.current_pose = pose.pose
         run.handle.publish_feedback(fb)
+        self.progress_pub.publish(_progress(fb, run.multi, self.get_clock().now().to_msg()))
         self.diagnostics.set("task", diag.OK, step.text, phase=step.phase,
                              position_error_m=step.position_error_m, step_ms=1e3 * (time.perf_counter() - t0))
         if step.done or step.failed_reason:

@@ -29,6 +29,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("output", type=Path, help="the .mcap file to write")
     parser.add_argument("--topics", nargs="+", metavar="TOPIC", help="record exactly these topics")
     parser.add_argument("--images", action="store_true", help="also record camera images")
+    parser.add_argument("--action-feedback", action="store_true",
+                        help="also record the hidden _action/feedback topics (their content is always recorded "
+                             "as /ppod/planner/progress)")
     parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
 
 
@@ -36,13 +39,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 ALWAYS = frozenset({topics.DIAGNOSTICS, topics.TF, topics.ROSOUT})
 
 
-def default_include(images: bool):
+def default_include(images: bool, action_feedback: bool = False):
+    """What ``ppod record`` keeps by default. The planner's action feedback is always kept as the
+    plain ppod/planner/progress topic; the hidden ``_action/feedback`` topics only on request
+    (``action_feedback``), as ``ros2 bag record --include-hidden-topics`` does: their generated type
+    names (``Name_FeedbackMessage``) are rejected by some readers (mcap-ros2-support)."""
+
     def include(topic: str, type_name: str) -> bool:
         if type_name == "sensor_msgs/msg/Image" and not images:
             return False
         if "/_action/" in topic:
-            # Feedback and status are what an operator saw; goal/result/cancel are services anyway.
-            return topic.endswith("/_action/feedback") or topic.endswith("/_action/status")
+            # Status is what an operator saw; goal/result/cancel are services anyway.
+            return topic.endswith("/_action/status") or (action_feedback and topic.endswith("/_action/feedback"))
         return topic.startswith("/ppod/") or topic in ALWAYS
 
     return include
@@ -54,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
     args.output.parent.mkdir(parents=True, exist_ok=True)
     wanted = None if not args.topics else {"/" + t.lstrip("/") for t in args.topics}
-    include = (lambda topic, _type: topic in wanted) if wanted else default_include(args.images)
+    include = (lambda topic, _type: topic in wanted) if wanted else default_include(args.images, args.action_feedback)
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     started = time.monotonic()

@@ -32,6 +32,7 @@ VIZ_MARKERS = "ppod/viz/markers"                 # visualization_msgs/MarkerArra
 TF = "/tf"                                       # ppod_msgs/TFMessage (recorded as tf2_msgs/msg/TFMessage)
 ACCEL_GOAL_PLOT = "ppod/viz/accel_goal"          # geometry_msgs/AccelStamped: goal amplitude, harmonic 1
 ACCEL_MEASURED_PLOT = "ppod/viz/accel_measured"  # geometry_msgs/AccelStamped: measured amplitude, harmonic 1
+PLANNER_PROGRESS = "ppod/planner/progress"       # ppod_msgs/PlannerProgress: the action feedback, recordable
 MOVE_PART_TARGET = "ppod/move_part/target"       # ppod_msgs/PartPoseArray, latched: targets of MovePart goals
 ROSOUT = "/rosout"                               # rcl_interfaces/Log: every node's log (recorded)
 # names that lived elsewhere before (kept importable there)

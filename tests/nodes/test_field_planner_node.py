@@ -152,7 +152,7 @@ def test_a_sensorless_move_part_positions_a_part_no_camera_sees(ros):
 def test_move_parts_brings_two_parts_to_their_own_goals_and_rejects_colliding_goals(ros):
     from geometry_msgs.msg import Pose2D
     from ppod_msgs.action import MoveParts
-    from ppod_msgs.msg import PartPose, PartPoseArray
+    from ppod_msgs.msg import PartPose, PartPoseArray, PlannerProgress
     from ppod_msgs.msg import PlateMotion as PlateMotionMsg
     from rclpy.action import ActionClient
 
@@ -165,6 +165,7 @@ def test_move_parts_brings_two_parts_to_their_own_goals_and_rejects_colliding_go
 
     _active(ros, ros.make(FieldPlannerNode))
     goals = ros.collect(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+    progress = ros.collect(PlannerProgress, topics.PLANNER_PROGRESS, qos.STREAM)
     poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
     washer = PointPart(mu=0.3, footprint=Footprint.from_value({"disk": 0.006}))
     dyn = PartDynamics([washer, washer], np.array([[-0.04, 0.035, 0.0], [0.045, 0.02, 0.0]]))
@@ -211,3 +212,7 @@ def test_move_parts_brings_two_parts_to_their_own_goals_and_rejects_colliding_go
     assert math.hypot(final[0, 0] + 0.02, final[0, 1] - 0.01) <= 2.5e-3
     assert math.hypot(final[1, 0] - 0.02, final[1, 1] + 0.01) <= 2.5e-3
     assert feedback and list(feedback[-1].feedback.part_ids) == [7, 9]
+    # The same feedback on the plain, recordable topic.
+    assert ros.wait_until(lambda: len(progress) > 0, 5.0)
+    assert {p.action for p in progress} == {"move_parts"} and list(progress[-1].part_ids) == [7, 9]
+    assert {p.text for p in progress} <= {f.feedback.text for f in feedback}

@@ -1,4 +1,5 @@
-"""MovePart's action feedback is recorded (as rosbag2 names it) and rosbags decodes it from the file."""
+"""MovePart's action feedback is recorded on request (as rosbag2 names it) and rosbags decodes it from
+the file; by default only its plain copy, /ppod/planner/progress, is recorded."""
 
 import shutil
 import time
@@ -27,7 +28,8 @@ def test_action_feedback_is_recorded_and_decoded_by_rosbags(ros, tmp_path):
 
     ActionServer(ros.helper, MovePart, "/" + topics.MOVE_PART, execute_callback=execute)
     path = tmp_path / "feedback.mcap"
-    recorder = McapRecorder(ros.helper, path, default_include(images=False), discovery_period_s=0.2)
+    recorder = McapRecorder(ros.helper, path, default_include(images=False, action_feedback=True),
+                            discovery_period_s=0.2)
     client = ActionClient(ros.helper, MovePart, "/" + topics.MOVE_PART)
     try:
         assert client.wait_for_server(timeout_sec=10)
@@ -53,3 +55,15 @@ def test_action_feedback_is_recorded_and_decoded_by_rosbags(ros, tmp_path):
         assert conns[0].msgtype == "ppod_msgs/action/MovePart_FeedbackMessage"
         texts = [reader.deserialize(raw, c.msgtype).feedback.text for c, _, raw in reader.messages(connections=conns)]
     assert texts == [f"step {i}" for i in range(5)]
+
+
+def test_by_default_the_hidden_feedback_is_left_out_and_its_plain_copy_recorded():
+    from ppod_nodes.cli.record import default_include
+    from ppod_nodes.common import topics
+
+    hidden = "/" + topics.MOVE_PARTS + "/_action/feedback"
+    include, on_request = default_include(images=False), default_include(images=False, action_feedback=True)
+    assert not include(hidden, "ppod_msgs/action/MoveParts_FeedbackMessage")
+    assert on_request(hidden, "ppod_msgs/action/MoveParts_FeedbackMessage")
+    assert include("/" + topics.PLANNER_PROGRESS, "ppod_msgs/msg/PlannerProgress")
+    assert include("/" + topics.MOVE_PARTS + "/_action/status", "action_msgs/msg/GoalStatusArray")

@@ -51,10 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scene", type=Path, help="scene YAML for the simulated device (default: the packaged one)")
     parser.add_argument("--goals", type=Path, metavar="GOALS.yaml",
                         help="several parts to their own goals at once (docs/planner.md); default without "
-                             "--part/--goal: the bracket and the two washers of the default scene")
+                             "--part/--goal: the bracket and the two washers of the default scene, to 2 mm / 3 deg")
     parser.add_argument("--keep-clear", action="store_true",
-                        help="with --goals: also keep the predicted paths clear of the parts not commanded "
-                             "(the default set always does)")
+                        help="with several goals: also keep the predicted paths clear of the parts not commanded")
     parser.add_argument("--part", default=None,
                         help="one part with MovePart: a scene label (first match) or index (default: bracket)")
     parser.add_argument("--goal", nargs="+", type=float, default=None, metavar="V",

@@ -15,9 +15,13 @@ from ppod_nodes.cli.demo import _Demo, _say
 from ppod_ros.errors import ConfigError, DeviceError
 from ppod_ros.planning.goals import GoalEntry, load_goals_file, resolve_parts
 
-#: The default set: the bracket, oriented, and the two washers of the default scene.
-DEFAULT_GOALS = (GoalEntry("bracket", 0.02, -0.02, 0.0), GoalEntry("washer", -0.03, 0.02, None),
-                 GoalEntry("washer", 0.03, 0.03, None))
+#: The default set: the bracket, oriented, and the two washers of the default scene, to the issue's
+#: three-part tolerances (2 mm / 3 deg): the tracker's error on a part (up to ~0.5 mm measured) is
+#: half of a 1 mm tolerance, so the planner's "done" at 1 mm is not always 1 mm in ground truth.
+DEFAULT_TOL_MM, DEFAULT_TOL_DEG = 2.0, 3.0
+DEFAULT_GOALS = (GoalEntry("bracket", 0.02, -0.02, 0.0, DEFAULT_TOL_MM, DEFAULT_TOL_DEG),
+                 GoalEntry("washer", -0.03, 0.02, None, DEFAULT_TOL_MM, DEFAULT_TOL_DEG),
+                 GoalEntry("washer", 0.03, 0.03, None, DEFAULT_TOL_MM, DEFAULT_TOL_DEG))
 SETTLE_S = 0.5  # within tolerance for this long at the end: reached (as the planner's settle time)
 
 

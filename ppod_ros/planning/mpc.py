@@ -346,6 +346,19 @@ class MultiTask:
         self.switches = 0
         self.last_prediction: dict | None = None   # {"t_s", "motion", "poses", "velocity" (G, 3) scaled}
         self._bases: dict[str, PlateMotion] = {}
+        # Goals grouped by part model (equal models, e.g. two washers, share one solver call), and
+        # the model velocities of this replanning step's motions (the poses are fixed within a step).
+        # With keep_clear the uncommanded parts are predicted too (rows after the goals'), so that a
+        # candidate that pushes them into a commanded part's path costs what the collision costs.
+        commanded = [g.index for g in self.goals]
+        self._others = [i for i in range(len(self.parts)) if i not in commanded] if self.keep_clear else []
+        self._rows = commanded + self._others
+        groups: dict[tuple, list[int]] = {}
+        for j, row in enumerate(self._rows):
+            groups.setdefault(tuple(self.parts[row].key), []).append(j)
+        self._groups = [(self.parts[self._rows[js[0]]], js) for js in groups.values()]
+        self._memo: dict[bytes, tuple[np.ndarray, bool]] = {}
+        self._memo_poses: bytes | None = None
 
     # ------------------------------------------------------------------ templates
     def _base(self, kind: str) -> PlateMotion:
@@ -579,18 +592,8 @@ class MultiTask:
     def _residuals(self, motions, poses, statuses):
         s, H = self.settings, self.settings.horizon_s
         M, G = len(motions), len(self.goals)
-        vel = np.zeros((M, G, 3))
-        ok = np.ones(M, bool)
-        for k, g in enumerate(self.goals):
-            part = self.parts[g.index]
-            if isinstance(part, RigidPart):
-                v, valid = predict_velocities(motions, part, poses[g.index][None, :])
-                vel[:, k, :] = v[:, 0, :]
-            else:
-                v, valid = predict_velocities(motions, part, poses[g.index][None, :2])
-                vel[:, k, :2] = v[:, 0, :]
-            ok &= valid[:, 0]
-        vel = np.nan_to_num(vel)
+        vel_all, ok = self._velocities(motions, poses)
+        vel = vel_all[:, :G]
         scales = np.array([self.state[g.index].scale for g in self.goals])
         way, weight = self._waypoints(poses, statuses)
         cur = np.array([poses[g.index] for g in self.goals])
@@ -604,9 +607,12 @@ class MultiTask:
         parts = [res_xy.reshape(M, -1), res_th]
         # Collisions between predicted positions (commanded parts, and the others if asked).
         idx = [g.index for g in self.goals]
-        others = [i for i in range(len(self.parts)) if i not in idx and np.all(np.isfinite(poses[i, :2]))] \
-            if self.keep_clear else []
-        centres = np.concatenate([pred[..., :2], np.broadcast_to(poses[others, :2], (M, len(others), 2))], axis=1)
+        others = [j for j, i in enumerate(self._others) if np.all(np.isfinite(poses[i, :2]))]
+        # The others where the candidate takes them (their own friction unknown: the model's).
+        pred_others = (poses[[self._others[j] for j in others], :2][None]
+                       + vel_all[:, [G + j for j in others], :2] * (H - 0.5 * r))
+        others = [self._others[j] for j in others]
+        centres = np.concatenate([pred[..., :2], pred_others], axis=1)
         radii = np.concatenate([self.radius[idx], self.radius[others]])
         pen = []
         n = centres.shape[1]
@@ -617,6 +623,40 @@ class MultiTask:
         if pen:
             parts.append(np.stack(pen, axis=1))
         return np.concatenate(parts, axis=1) / s.max_speed_mps, vel, ok
+
+    def _velocities(self, motions, poses) -> tuple[np.ndarray, np.ndarray]:
+        """Model velocities (M, R, 3) (NaN as 0) of the solved rows (the commanded parts in goal order,
+        then the kept-clear others) and validity (M,) at the commanded parts: one batched solver call
+        per part model for the motions not yet solved at these poses. Unseen rows: velocity 0."""
+        G, rows = len(self.goals), self._rows
+        R = len(rows)
+        pose_key = np.ascontiguousarray(poses[rows]).tobytes()
+        if pose_key != self._memo_poses:
+            self._memo, self._memo_poses = {}, pose_key
+        new: dict[bytes, PlateMotion] = {}
+        for motion in motions:
+            if motion.key not in self._memo:
+                new.setdefault(motion.key, motion)
+        if new:
+            todo = list(new.values())
+            v_new = np.zeros((len(todo), R, 3))
+            ok_new = np.ones(len(todo), bool)
+            for part, js in self._groups:
+                dim = 3 if isinstance(part, RigidPart) else 2
+                cfg = np.array([poses[rows[j], :dim] for j in js])
+                seen = np.all(np.isfinite(cfg[:, :2]), axis=1)
+                cfg[~seen] = 0.0
+                v, valid = predict_velocities(todo, part, cfg)
+                v[:, ~seen] = 0.0
+                v_new[:, js, :dim] = v
+                commanded = np.array(js) < G
+                ok_new &= valid[:, commanded].all(axis=1)
+            v_new = np.nan_to_num(v_new)
+            for motion, v, o in zip(todo, v_new, ok_new):
+                self._memo[motion.key] = (v, bool(o))
+        vel = np.array([self._memo[m.key][0] for m in motions]).reshape(len(motions), R, 3)
+        ok = np.array([self._memo[m.key][1] for m in motions], bool)
+        return vel, ok
 
     def _refine(self, start: PlateMotion, poses, statuses) -> tuple[PlateMotion | None, float]:
         s = self.settings

@@ -144,8 +144,8 @@ def test_predict_uses_the_batched_solver_when_present(monkeypatch):
 
     motions = [PlateMotion.single(30.0, [10.0, 0, 5.0, 0, 0, 0], [0, 0, math.pi / 2, 0, 0, 0]), PlateMotion.zero()]
     configs = np.array([[0.01, 0.0], [0.0, 0.02]])
-    v, ok = predict.predict_velocities(motions, PointPart(0.3), configs)  # the loop over solve_field
-    assert v.shape == (2, 2, 2) and ok.shape == (2, 2) and np.all(v[1] == 0.0)
+    v, ok = predict.predict_velocities(motions, PointPart(0.3), configs)
+    assert v.shape == (2, 2, 2) and ok.shape == (2, 2) and np.all(v[1] == 0.0) and np.all(ok[1])
     calls = []
 
     class Result:
@@ -158,7 +158,7 @@ def test_predict_uses_the_batched_solver_when_present(monkeypatch):
 
     monkeypatch.setattr(physics, "solve_fields", solve_fields, raising=False)
     v2, _ = predict.predict_velocities(motions, PointPart(0.3), configs)
-    assert calls == [2] and np.all(v2 == 1.0)
+    assert calls == [1] and np.all(v2[0] == 1.0) and np.all(v2[1] == 0.0)  # one call; the rest motion unsolved
     with pytest.raises(ConfigError, match="configs"):
         predict.predict_velocities(motions, PointPart(0.3), np.zeros((2, 3)))
 
@@ -173,3 +173,47 @@ def test_an_unseen_commanded_part_is_not_steered_and_the_others_are_still_planne
     assert step.plan_ms > 0  # replanned for the part still seen
     step = task.step(7.5, [[0.03, -0.01, 0.0], [math.nan] * 3])
     assert step.failed_reason and "part 1 not seen" in step.failed_reason
+
+
+def test_equal_part_models_share_one_solver_call_and_a_step_solves_each_motion_once(monkeypatch):
+    from ppod_ros.planning import mpc
+
+    bracket, washer = published_rigid_part(), PointPart(0.3)
+    calls = []
+    real = mpc.predict_velocities
+
+    def counting(motions, part, configs, settings=None):
+        calls.append((part.kind, len(configs), tuple(m.key for m in motions)))
+        return real(motions, part, configs, settings)
+
+    monkeypatch.setattr(mpc, "predict_velocities", counting)
+    task = MultiTask([bracket, washer, washer], [PartGoal(0, 0.02, -0.02, 0.0), PartGoal(1, -0.03, 0.03),
+                                                 PartGoal(2, 0.03, 0.03)], timeout_s=30.0)
+    step = task.step(0.0, [[0.05, -0.04, 0.9], [-0.05, 0.045, 0.0], [0.055, 0.045, 0.0]])
+    assert step.motion is not None
+    # The two washers (one model) are solved together: every call is the bracket at 1 configuration
+    # or the washers at 2; and no motion is solved twice for a model within the step.
+    assert {(kind, n) for kind, n, _ in calls} == {("rigid", 1), ("point", 2)}
+    for kind in ("rigid", "point"):
+        keys = [k for c in calls if c[0] == kind for k in c[2]]
+        assert len(keys) == len(set(keys))
+
+
+def test_keep_clear_predicts_the_uncommanded_parts_where_the_candidate_takes_them():
+    washer = PointPart(0.3)
+    # Part 0 to the centre along x; part 1 (not commanded) 10 mm ahead of it: clear now (3 + 3 mm
+    # radii + 2 mm clearance), but the sink contracts their distance below 8 mm over the horizon.
+    goals = [PartGoal(0, 0.0, 0.0)]
+    poses = np.array([[0.03, 0.0, 0.0], [0.02, 0.0, 0.0]])
+    sink = template_motion("sink", MultiTask([washer, washer], goals), goals[0], poses[0])
+    costs = {}
+    for keep in (False, True):
+        task = MultiTask([washer, washer], goals, keep_clear=keep)
+        statuses = task._statuses(0.0, poses)
+        task.t0 = 0.0
+        vel_all, ok = task._velocities([sink], poses)
+        assert vel_all.shape == (1, 2 if keep else 1, 3) and ok[0]
+        if keep:  # the uncommanded part moves under the sink (towards the goal)
+            assert vel_all[0, 1, 0] < 0
+        costs[keep] = float(task._costs([sink], poses, statuses)[0][0])
+    assert costs[True] > costs[False] + 0.005  # the predicted collision is penalised

@@ -36,6 +36,9 @@ OK = "ok"
 #: count; they are dropped on their own evidence).
 MAX_SUBSET_DROP = 2
 
+#: Alternative channel sets named in an ambiguity error (the rest are counted).
+AMBIGUOUS_SHOWN = 4
+
 
 class EstimationError(DeviceError):
     """The healthy channels no longer determine the plate's acceleration.
@@ -235,7 +238,10 @@ class SixDofSolver:
                 suspects = sorted({c for drop in amb.candidates for c in drop})
                 for c in suspects:
                     status[c] = "ambiguous: inconsistent, or a consistent channel's twin"
-                alternatives = " or ".join("{" + ", ".join(names[c] for c in d) + "}" for d in amb.candidates)
+                shown = amb.candidates[:AMBIGUOUS_SHOWN]
+                alternatives = " or ".join("{" + ", ".join(names[c] for c in d) + "}" for d in shown)
+                if len(amb.candidates) > len(shown):
+                    alternatives += f" ({len(amb.candidates)} alternatives in all)"
                 raise EstimationError(
                     f"accelerometer channels are inconsistent and the array cannot tell which are broken: "
                     f"removing {alternatives} each leaves a consistent set; check their wiring and gains",

@@ -45,6 +45,7 @@ from ppod_ros.errors import ConfigError, PpodError
 from ppod_ros.estimation import EstimationError
 from ppod_ros.estimation.calibration import calibration_path, load_calibration
 from ppod_ros.estimation.channel_set import ChannelSetSettings
+from ppod_ros.estimation.misfit import MisfitHistory, load_misfit, save_misfit
 
 
 class AccelFeedbackNode(PpodLifecycleNode):
@@ -78,6 +79,7 @@ class AccelFeedbackNode(PpodLifecycleNode):
         self._lock = threading.Lock()
         self._active_goal_key: bytes | None = None
         self._sub = None
+        self._misfit_store: tuple[Path, str] | None = None
         self._received: list[float] = []
         self._last: LoopOutput | None = None
         self.accel_pub = self.create_lifecycle_publisher(PlateAcceleration, topics.ACCELERATION, qos.STREAM)
@@ -101,10 +103,20 @@ class AccelFeedbackNode(PpodLifecycleNode):
         calibration = load_calibration(cache, config.name) if params["use_calibration"] else None
         self.get_logger().info(f"accelerometer calibration: {calibration_path(cache, config.name)}"
                                if calibration is not None else "accelerometer calibration: none (nominal layout)")
+        # The misfit learned from operation (healthy estimates), kept per device next to the calibration.
+        try:
+            misfit = load_misfit(cache, config.name)
+        except ConfigError as exc:
+            self.get_logger().warning(f"{exc}; learning the misfit afresh")
+            misfit = None
+        if misfit is None or misfit.names != tuple(config.accelerometers.layout.names):
+            misfit = MisfitHistory(config.accelerometers.layout.names)
+        self._misfit_store = (cache, config.name)
         self.loop = FeedbackLoop(config, settings, learning, store=CorrectionStore(cache),
                                  plant_learning=plant_learning, calibration=calibration,
                                  channel_set=ChannelSetSettings(params["channel_drop_after"],
-                                                                params["channel_restore_after"]))
+                                                                params["channel_restore_after"]),
+                                 misfit=misfit)
         self.bus = open_bus_waiting(config.can, params["bus_wait_s"])
         self.link = DeviceLink(self.bus, config)
         self.link.on_summary.append(self._on_summary)
@@ -121,8 +133,23 @@ class AccelFeedbackNode(PpodLifecycleNode):
             self._active_goal_key = None
             if self.loop is not None:
                 self.loop.set_goal(None, self._now())
+        self._save_misfit()
+
+    def _save_misfit(self) -> None:
+        if self.loop is None or self._misfit_store is None or self.loop.misfit is None:
+            return
+        try:
+            with self._lock:
+                if not self.loop.misfit.count.any():
+                    return
+                path = save_misfit(self.loop.misfit, *self._misfit_store)
+        except OSError as exc:
+            self.get_logger().warning(f"accelerometer misfit history not stored: {exc}")
+            return
+        self.get_logger().info(f"accelerometer misfit history: {path}")
 
     def on_cleanup_node(self):
+        self._save_misfit()
         if self.link is not None:
             self.link.stop()
         if self.bus is not None:

@@ -38,6 +38,7 @@ from ppod_ros.device.schema import DeviceConfig
 from ppod_ros.errors import ConfigError
 from ppod_ros.estimation import AccelCalibration, AccelEstimator, PlateEstimate
 from ppod_ros.estimation.channel_set import ChannelSet, ChannelSetChange, ChannelSetSettings
+from ppod_ros.estimation.misfit import MisfitHistory
 from ppod_ros.motion import PlateMotion
 
 
@@ -123,6 +124,10 @@ class FeedbackLoop:
         The device's stored array calibration (``ppod calibrate accel``), used by the estimator.
     channel_set : ChannelSetSettings, optional
         Hysteresis of the channel set the loop uses (:mod:`~ppod_ros.estimation.channel_set`).
+    misfit : MisfitHistory, optional
+        The device's misfit learned from operation (:mod:`~ppod_ros.estimation.misfit`): every
+        healthy estimate adds to it; without a calibration, once it is ready its per-channel
+        allowance replaces the default (the calibration's, measured on chosen motions, wins).
     """
 
     def __init__(self, config: DeviceConfig, settings: OnlineSettings | None = None,
@@ -131,13 +136,16 @@ class FeedbackLoop:
                  store: CorrectionStore | None = None,
                  plant_learning: PlantLearningSettings | None = None,
                  calibration: AccelCalibration | None = None,
-                 channel_set: ChannelSetSettings | None = None):
+                 channel_set: ChannelSetSettings | None = None,
+                 misfit: MisfitHistory | None = None):
         self.config = config
         self.settings = settings or OnlineSettings()
         self.learning = learning or LearningSettings()
         self.planner = GoalPlanner(config)
-        self.estimator = AccelEstimator(config.accelerometers.layout, harmonics=self.settings.estimator_harmonics,
-                                        second_order_terms=self.settings.second_order_terms, calibration=calibration)
+        self.calibration = calibration
+        self.misfit = misfit
+        self._learned_allowance = False
+        self.estimator = self._make_estimator()
         self.channels = ChannelSet(self.estimator.layout.names, channel_set)
         self.limits = DeviceLimits(max_current_a=config.limits.coil_current_a,
                                    max_step_a=config.limits.correction_step_a)
@@ -153,6 +161,16 @@ class FeedbackLoop:
         self.initial_source = ""
         self._resume_s = math.inf
         self._collect = _Collect()
+
+    def _make_estimator(self) -> AccelEstimator:
+        """The estimator: the calibration's allowance, else the learned one once ready, else the default."""
+        allowance = None
+        if self.calibration is None and self.misfit is not None and self.misfit.ready:
+            allowance = self.misfit.allowance()
+            self._learned_allowance = True
+        return AccelEstimator(self.config.accelerometers.layout, harmonics=self.settings.estimator_harmonics,
+                              second_order_terms=self.settings.second_order_terms, calibration=self.calibration,
+                              misfit_allowance=allowance)
 
     def _nominal_plant(self, motion: PlateMotion, k: np.ndarray) -> PlantModel:
         return PlantModel.from_response(self.planner.plant.frequency_response, motion.frequency_hz, k)
@@ -233,6 +251,9 @@ class FeedbackLoop:
         # Every estimate judges all channels (a gross fault is out of it at once); the set the loop
         # uses changes only on persistent evidence, and a change restarts learning (ChannelSet).
         estimate = self.estimator.from_summaries(k, stack, frequency_hz)
+        learned = self.misfit is not None and self.misfit.add(estimate)
+        if learned and not self._learned_allowance and self.calibration is None and self.misfit.ready:
+            self.estimator = self._make_estimator()
         change = self.channels.observe(dict(zip(estimate.channels, estimate.status)))
         if self.channels.removed:
             active = list(self.channels.active)

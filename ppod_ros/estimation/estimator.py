@@ -47,6 +47,10 @@ class AccelEstimator:
         The device's array calibration (:mod:`~ppod_ros.estimation.calibration`): readings are
         divided by its gains, its axes replace the layout's, and each channel's misfit allowance
         is set from its measured misfit.
+    misfit_allowance : array_like, shape (C,), optional
+        Per-channel misfit allowance (fraction of each channel's reading), e.g. learned from
+        operation (:meth:`~ppod_ros.estimation.misfit.MisfitHistory.allowance`); replaces the
+        calibration's and the settings' default.
     """
 
     def __init__(
@@ -60,6 +64,7 @@ class AccelEstimator:
         tolerance: float = 1e-9,
         health: HealthSettings | None = None,
         calibration: AccelCalibration | None = None,
+        misfit_allowance: np.ndarray | None = None,
     ):
         if not isinstance(layout, AccelerometerLayout):
             raise ConfigError(f"layout: expected an AccelerometerLayout, got {type(layout).__name__}")
@@ -78,6 +83,8 @@ class AccelEstimator:
             layout = calibration.layout(layout)
             self._gain = np.asarray(calibration.gain, float)
             allowance = calibration.misfit_allowance()
+        if misfit_allowance is not None:
+            allowance = misfit_allowance
         self.layout = layout
         self.harmonics = int(harmonics)
         self.terms = check_terms(second_order_terms)

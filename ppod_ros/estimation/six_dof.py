@@ -30,9 +30,14 @@ from ppod_ros.estimation.second_order import second_order_phasors
 from ppod_ros.motion import MAX_HARMONIC, PlateMotion
 
 OK = "ok"
-#: Most channels removed at once to make the rest consistent (two: a pair of swapped wires);
-#: beyond that, channels go one at a time (C(12, 2) = 66 refits per estimate at most).
+#: Most channels removed at once to make the rest consistent (two: a pair of swapped wires;
+#: C(12, 2) = 66 refits per estimate at most), and the most one estimate blames on residuals: a
+#: record that needs more is an EstimationError, not a guess (suspects such as flat channels do not
+#: count; they are dropped on their own evidence).
 MAX_SUBSET_DROP = 2
+
+#: Alternative channel sets named in an ambiguity error (the rest are counted).
+AMBIGUOUS_SHOWN = 4
 
 
 class EstimationError(DeviceError):
@@ -78,6 +83,10 @@ class PlateEstimate:
     cycles : float
         Periods of data behind the estimate (fractional for a partial cycle; the number of
         cycles averaged for summaries).
+    channel_misfit : ndarray, shape (C,), optional
+        Each used channel's in-sample residual (leverage-corrected) as a fraction of its own
+        reading; NaN for channels not used. What :class:`~ppod_ros.estimation.misfit.MisfitHistory`
+        learns the device's allowance from.
     """
 
     frequency_hz: float
@@ -92,6 +101,7 @@ class PlateEstimate:
     iterations: int
     last_change: float
     cycles: float
+    channel_misfit: np.ndarray | None = None
 
     @property
     def used(self) -> np.ndarray:
@@ -114,6 +124,14 @@ class PlateEstimate:
         """The estimate as a :class:`PlateMotion` (harmonics up to MAX_HARMONIC)."""
         keep = self.k <= MAX_HARMONIC
         return PlateMotion.from_phasors(self.frequency_hz, self.k[keep], self.phasors[keep], name=name)
+
+
+class _AmbiguousError(Exception):
+    """Several channel sets of the same size explain the misfit equally (internal to the solver)."""
+
+    def __init__(self, candidates: list[tuple[int, ...]]):
+        super().__init__(candidates)
+        self.candidates = candidates
 
 
 class SixDofSolver:
@@ -214,10 +232,37 @@ class SixDofSolver:
             # are two bad channels at once, and removing one at a time can blame a good one; a
             # bad channel next to its near-collinear twin pulls the fit and hides in-sample), else
             # remove the one that best explains the misfit.
-            found = self._consistent_subset(idx, H, Yc, scale2, use, own, thr, allow)
+            try:
+                found = self._consistent_subset(idx, H, Yc, scale2, use, own, thr, allow)
+            except _AmbiguousError as amb:
+                suspects = sorted({c for drop in amb.candidates for c in drop})
+                for c in suspects:
+                    status[c] = "ambiguous: inconsistent, or a consistent channel's twin"
+                shown = amb.candidates[:AMBIGUOUS_SHOWN]
+                alternatives = " or ".join("{" + ", ".join(names[c] for c in d) + "}" for d in shown)
+                if len(amb.candidates) > len(shown):
+                    alternatives += f" ({len(amb.candidates)} alternatives in all)"
+                raise EstimationError(
+                    f"accelerometer channels are inconsistent and the array cannot tell which are broken: "
+                    f"removing {alternatives} each leaves a consistent set; check their wiring and gains",
+                    dict(zip(names, status)),
+                ) from None
             if not found:
                 worst, z_out, rel_out = self._leave_one_out(idx, H, Yc, scale2, use, own, thr, allow)
                 found = [] if worst is None else [(worst, z_out, rel_out)]
+            blamed = sum(s.startswith("inconsistent residual") for s in status) + len(found)
+            if blamed > MAX_SUBSET_DROP:
+                # More channels misfit than a record can attribute (the most a single fault
+                # breaks is two, a swapped pair): blaming them one by one would keep going until
+                # a set agrees, which need not be the healthy one.
+                for c, z_out, rel_out in found:
+                    status[c] = f"inconsistent residual ({z_out:.1f} sigma, {rel_out:.0%} of its reading)"
+                raise EstimationError(
+                    f"accelerometer channels are inconsistent beyond attribution: {blamed} channels misfit "
+                    f"(more than {MAX_SUBSET_DROP}), so which are broken cannot be told; check the wiring and "
+                    f"the sensors' gains",
+                    dict(zip(names, status)),
+                )
             for c, z_out, rel_out in found:
                 use[c] = False
                 status[c] = (
@@ -256,6 +301,7 @@ class SixDofSolver:
             iterations=iters,
             last_change=change,
             cycles=cycles,
+            channel_misfit=np.where(use, rel_in, np.nan),
         )
 
     @staticmethod
@@ -292,12 +338,14 @@ class SixDofSolver:
         The rest must determine the motion and every one of its channels pass the in-sample test;
         every removed channel must fail the others' prediction. Among candidate sets of one size,
         the one with the smallest normalised residual power. Returns (channel, sigmas, fraction)
-        per removed channel, or [] when no such set exists.
+        per removed channel, or [] when no such set exists. Raises :class:`_AmbiguousError` when such
+        a set exists but another removal of the same size also leaves a consistent rest: which
+        channels are broken is then not identifiable from the record.
         """
         used = np.flatnonzero(use)
         K = H.shape[0]
         for m in range(1, MAX_SUBSET_DROP + 1):
-            best, best_chi2 = [], math.inf
+            best, best_chi2, candidates, blamed = [], math.inf, [], []
             for drop in itertools.combinations(used.tolist(), m):
                 rest = use.copy()
                 rest[list(drop)] = False
@@ -311,6 +359,7 @@ class SixDofSolver:
                 z_in, rel_in = self._studentized(H, Pfull, R, scale2, rest, own)
                 if np.any((z_in > thr) & (rel_in > allow)):
                     continue
+                candidates.append(drop)
                 out = []
                 for c in drop:
                     r_c = math.sqrt(np.sum(np.abs(R[:, c]) ** 2))
@@ -322,9 +371,16 @@ class SixDofSolver:
                     out.append((c, z, rel))
                 if not all(z > thr and rel > allow[c] for c, z, rel in out):
                     continue
+                blamed.append(drop)
                 chi2 = float(np.sum(np.abs(R[:, rest]) ** 2 / scale2[:, rest]))
                 if chi2 < best_chi2:
                     best, best_chi2 = out, chi2
+            if len(blamed) > 1 or (blamed and len(candidates) > 1):
+                # A removal explains the misfit, but another of the same size also leaves a
+                # consistent set (a channel and its near-collinear twin, a swapped pair and a pair
+                # the swap mimics): the data cannot say which channels are broken, and dropping the
+                # wrong ones would feed a broken channel to the estimate.
+                raise _AmbiguousError(candidates)
             if best:
                 return best
         return []

@@ -56,14 +56,3 @@ def test_action_feedback_is_recorded_and_decoded_by_rosbags(ros, tmp_path):
         texts = [reader.deserialize(raw, c.msgtype).feedback.text for c, _, raw in reader.messages(connections=conns)]
     assert texts == [f"step {i}" for i in range(5)]
 
-
-def test_by_default_the_hidden_feedback_is_left_out_and_its_plain_copy_recorded():
-    from ppod_nodes.cli.record import default_include
-    from ppod_nodes.common import topics
-
-    hidden = "/" + topics.MOVE_PARTS + "/_action/feedback"
-    include, on_request = default_include(images=False), default_include(images=False, action_feedback=True)
-    assert not include(hidden, "ppod_msgs/action/MoveParts_FeedbackMessage")
-    assert on_request(hidden, "ppod_msgs/action/MoveParts_FeedbackMessage")
-    assert include("/" + topics.PLANNER_PROGRESS, "ppod_msgs/msg/PlannerProgress")
-    assert include("/" + topics.MOVE_PARTS + "/_action/status", "action_msgs/msg/GoalStatusArray")

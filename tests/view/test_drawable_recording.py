@@ -90,11 +90,16 @@ def test_a_recording_has_drawable_schemas_that_independent_readers_decode(ros, t
         assert types[topic] == type_name
 
 
-def test_record_includes_action_feedback_tf_and_rosout_but_not_images():
+def test_record_includes_planner_progress_tf_and_rosout_but_not_images_or_hidden_feedback():
     from ppod_nodes.cli.record import default_include
 
     include = default_include(images=False)
-    assert include("/ppod/move_part/_action/feedback", "ppod_msgs/action/MovePart_FeedbackMessage")
+    # The action feedback's content is recorded as the plain planner progress topic; the hidden
+    # _action/feedback topic only on request (ppod record --action-feedback).
+    assert include("/ppod/planner/progress", "ppod_msgs/msg/PlannerProgress")
+    assert not include("/ppod/move_part/_action/feedback", "ppod_msgs/action/MovePart_FeedbackMessage")
+    assert default_include(images=False, action_feedback=True)(
+        "/ppod/move_part/_action/feedback", "ppod_msgs/action/MovePart_FeedbackMessage")
     assert include("/ppod/move_part/_action/status", "action_msgs/msg/GoalStatusArray")
     assert not include("/ppod/move_part/_action/send_goal", "x")
     assert include("/rosout", "rcl_interfaces/msg/Log") and include("/tf", "ppod_msgs/msg/TFMessage")

@@ -5,7 +5,7 @@ field_planner's MoveParts action (the model-predictive planner, docs/planner.md)
 the bracket to (0.02, -0.02) at 0 deg, the two washers to (-0.03, 0.02) and (0.03, 0.03). It
 prints the progress and then, from the simulator's ground truth, each commanded part's final pose
 and error, and writes ``OUT/summary.json`` (always, on timeout or failure too; format in
-docs/planner.md), the picture of each part's path to its goal (``OUT/demo.png``), the animation,
+docs/formats.md), the picture of each part's path to its goal (``OUT/demo.png``), the animation,
 the session as MCAP and every node's log. ``--timeout S`` bounds the device time of the whole set.
 
 With ``--part``/``--goal`` (not combined with ``--goals``), one part with MovePart, as before:
@@ -23,7 +23,7 @@ plate's acceleration-tracking error, and how the device clock kept up with real 
 
 examples:
   ppod demo                                    three parts of the default scene to three goals at once
-  ppod demo --goals goals.yaml --out out/g1    any set of goals (GOALS.yaml: docs/planner.md)
+  ppod demo --goals goals.yaml --out out/g1    any set of goals (GOALS.yaml: docs/formats.md)
   ppod demo --part bracket --goal 0.02 -0.02 0 one part with MovePart, the others gathered
   ppod demo --part washer --goal 0.03 0.03     a point part (position only)
   ppod demo --goal 0 -0.03 90 --out out/demo2
@@ -50,7 +50,7 @@ HELP = "the full demo: the stack against the simulated device brings a part to a
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scene", type=Path, help="scene YAML for the simulated device (default: the packaged one)")
     parser.add_argument("--goals", type=Path, metavar="GOALS.yaml",
-                        help="several parts to their own goals at once (docs/planner.md); default without "
+                        help="several parts to their own goals at once (docs/formats.md); default without "
                              "--part/--goal: the bracket and the two washers of the default scene, to 2 mm / 3 deg")
     parser.add_argument("--keep-clear", action="store_true",
                         help="with several goals: also keep the predicted paths clear of the parts not commanded")

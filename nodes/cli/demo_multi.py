@@ -1,5 +1,5 @@
 """``ppod demo`` with several goals at once (the default, or ``--goals GOALS.yaml``): the MoveParts
-action, the ground-truth report and ``OUT/summary.json`` (format: docs/planner.md)."""
+action, the ground-truth report and ``OUT/summary.json`` (format: docs/formats.md)."""
 
 from __future__ import annotations
 

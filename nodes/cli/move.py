@@ -1,6 +1,6 @@
 """Send several parts to their own goal poses at once on a running stack (the MoveParts action).
 
-GOALS.yaml (docs/planner.md): a list of {part, pose[, tol_mm, tol_deg]}; parts are named by the
+GOALS.yaml (docs/formats.md): a list of {part, pose[, tol_mm, tol_deg]}; parts are named by the
 tracker's label (the first tracked part with that label not already named) or by track id; pose
 x, y in m and theta in degrees (no theta: position only). Prints the planner's progress and each
 part's outcome; Ctrl-C cancels the goals (the plate ramps down and holds the parts).

@@ -291,14 +291,9 @@ class FieldPlannerNode(PpodLifecycleNode):
     async def _execute_multi(self, handle) -> MoveParts.Result:
         goal: MoveParts.Goal = handle.request
         result = MoveParts.Result()
-        try:
-            task, ids = self._build_multi(goal)
-        except PpodError as exc:
-            handle.abort()
-            result.success, result.reason = False, str(exc)
-            self.get_logger().error(f"MoveParts: {exc}")
+        task = self._start(handle, self._build_multi, result, "MoveParts")
+        if task is None:
             return result
-        self.running = _RunningTask(handle, task, ids, goal, self._now())
         self.get_logger().info("MoveParts: " + ", ".join(
             f"part {g_id} to ({t.x:.4f}, {t.y:.4f}" + (f", {math.degrees(t.theta):.1f} deg)" if g.theta_rad is not None
                                                        else ")")
@@ -318,14 +313,31 @@ class FieldPlannerNode(PpodLifecycleNode):
             result.time_to_goal_s.append(float(st.time_to_goal_s) if st is not None and st.reached else -1.0)
             pose = self._pose_of(int(pid))
             result.final_poses.append(pose.pose if pose is not None else type(goal.targets[0])())
+        self._end(handle, success, reason, "MoveParts")
+        return result
+
+    def _start(self, handle, build, result, name: str):
+        """Build the task for ``handle``'s goal and make it the running one; on a PpodError abort the
+        goal with the reason in ``result`` and return None."""
+        try:
+            task, ids = build(handle.request)
+        except PpodError as exc:
+            handle.abort()
+            result.success, result.reason = False, str(exc)
+            self.get_logger().error(f"{name}: {exc}")
+            return None
+        self.running = _RunningTask(handle, task, ids, handle.request, self._now())
+        return task
+
+    def _end(self, handle, success: bool, reason: str, name: str) -> None:
+        """Close the action goal the way it ended (canceled, succeeded or aborted) and log it."""
         if handle.is_cancel_requested:
             handle.canceled()
         elif success:
             handle.succeed()
         else:
             handle.abort()
-        self.get_logger().info(f"MoveParts {'succeeded' if success else 'ended'}: {reason}")
-        return result
+        self.get_logger().info(f"{name} {'succeeded' if success else 'ended'}: {reason}")
 
     def _on_cancel(self, _handle) -> CancelResponse:
         return CancelResponse.ACCEPT
@@ -364,14 +376,9 @@ class FieldPlannerNode(PpodLifecycleNode):
     async def _execute(self, handle) -> MovePart.Result:
         goal: MovePart.Goal = handle.request
         result = MovePart.Result()
-        try:
-            task, ids = self._build_task(goal)
-        except PpodError as exc:
-            handle.abort()
-            result.success, result.reason = False, str(exc)
-            self.get_logger().error(f"MovePart: {exc}")
+        task = self._start(handle, self._build_task, result, "MovePart")
+        if task is None:
             return result
-        self.running = _RunningTask(handle, task, ids, goal, self._now())
         self.target_pub.publish(PartPoseArray(parts=[PartPose(id=goal.part_id, label="target", pose=goal.target)]))
         self.get_logger().info(f"MovePart: part {goal.part_id} to ({goal.target.x:.4f}, {goal.target.y:.4f}"
                                + (f", {math.degrees(goal.target.theta):.1f} deg)" if goal.use_orientation else ")")
@@ -390,13 +397,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         if step is not None:
             result.position_error_m = float(step.position_error_m)
             result.orientation_error_rad = float(step.angle_error_rad or 0.0)
-        if handle.is_cancel_requested:
-            handle.canceled()
-        elif success:
-            handle.succeed()
-        else:
-            handle.abort()
-        self.get_logger().info(f"MovePart {'succeeded' if success else 'ended'}: {reason}")
+        self._end(handle, success, reason, "MovePart")
         return result
 
     def _pose_of(self, part_id: int) -> PartPose | None:

@@ -76,6 +76,9 @@ class SimWorld:
         self.process = SimProcess(config, port=port, rate=rate, seed=scene.seed if seed is None else seed,
                                   channel=channel)
         self.device = self.process.device
+        # The parts physics runs beside the device loop: one thread, so no call ever waits for a
+        # second thread or loads a parallel kernel mid-run (a stall there delays device time).
+        solver = solver if solver is not None else SolverSettings(threads=1)
         self.dynamics = PartDynamics([p.part for p in scene.parts], scene.poses, settings=solver,
                                      time_s=self.device.time_s)
         self.circles = [p.circles for p in scene.parts]

@@ -35,7 +35,7 @@ from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import _layout as lay
 from ppod_ros.physics import _threads
 from ppod_ros.physics._dynamics_kernel import AUX_READY, advance_group, advance_group_serial
-from ppod_ros.physics._params import check_part, ensure_compiled, point_rows, rigid_rows
+from ppod_ros.physics._params import check_part, ensure_compiled, is_loaded, point_rows, rigid_rows
 from ppod_ros.physics._rk import INTEGRATORS
 from ppod_ros.physics.plate import motion_table, table_kmax
 from ppod_ros.physics.settings import REASONS, SolverSettings
@@ -232,7 +232,9 @@ class PartDynamics:
                     # Serial unless the work is large enough to pay a parallel call's wake-up.
                     cost_kind = f"dyn{g.kind}"
                     units = int(np.count_nonzero(g.status == lay.OK)) * max(1.0, duration / T)
-                    nthreads = _threads.plan(cost_kind, units, self.settings.threads)
+                    # A parallel kernel not loaded yet costs its loading too (a mid-run stall otherwise).
+                    nthreads = _threads.plan(cost_kind, units, self.settings.threads,
+                                             parallel_ready=is_loaded(("dyn", g.kind, True)))
                     kernel = advance_group if nthreads > 1 else advance_group_serial
                     self.setup_seconds += ensure_compiled(("dyn", g.kind, nthreads > 1))
                     tk = time.perf_counter()

@@ -153,25 +153,36 @@ def table_peak(table: np.ndarray, k: np.ndarray | None = None) -> np.ndarray:
 
 def motion_extremes(phasors: np.ndarray, k: np.ndarray, radius_m: float) -> tuple[float, float, float]:
     """(peak |p''|, peak |alpha|, min over the disc and cycle of g + a_n) of acceleration phasors (K, 6)."""
+    acc, ang, margin = motion_extremes_many(np.asarray(phasors, dtype=complex)[None], k, radius_m)[0]
+    return float(acc), float(ang), float(margin)
+
+
+def motion_extremes_many(phasors: np.ndarray, k: np.ndarray, radius_m: float) -> np.ndarray:
+    """:func:`motion_extremes` of S motions on the same harmonics at once: phasors (S, K, 6) -> (S, 3)."""
     X = np.asarray(phasors, dtype=complex)
-    if X.shape[0] == 0 or not np.any(X):
-        return 0.0, 0.0, GRAVITY_MPS2
+    S = X.shape[0]
+    out = np.tile([0.0, 0.0, GRAVITY_MPS2], (S, 1))
+    if X.shape[1] == 0 or not np.any(X):
+        return out
     k = np.asarray(k)
     n = PEAK_SAMPLES_PER_PERIOD * max(4, int(np.max(k)))
+    table = X.transpose(1, 0, 2).reshape(X.shape[1], S * 6)
 
     def fn(theta: np.ndarray) -> np.ndarray:
-        u = synthesize(X, k, theta)
+        u = synthesize(table, k, theta).reshape(theta.size, S, 6)
         return np.stack(
             [
-                np.linalg.norm(u[:, :3], axis=1),
-                np.linalg.norm(u[:, 3:], axis=1),
-                radius_m * np.hypot(u[:, 3], u[:, 4]) - u[:, 2],  # the loss of normal acceleration
+                np.linalg.norm(u[..., :3], axis=2),
+                np.linalg.norm(u[..., 3:], axis=2),
+                radius_m * np.hypot(u[..., 3], u[..., 4]) - u[..., 2],  # the loss of normal acceleration
             ],
-            axis=1,
-        )
+            axis=2,
+        ).reshape(theta.size, S * 3)
 
-    acc, ang, loss = refined_max(fn, n)
-    return float(acc), float(ang), float(GRAVITY_MPS2 - loss)
+    peaks = refined_max(fn, n).reshape(S, 3)
+    out[:, :2] = peaks[:, :2]
+    out[:, 2] = GRAVITY_MPS2 - peaks[:, 2]
+    return out
 
 
 @dataclass(frozen=True)
@@ -409,6 +420,7 @@ __all__ = [
     "Envelope",
     "EnvelopeReport",
     "motion_extremes",
+    "motion_extremes_many",
     "refined_max",
     "table_peak",
 ]

@@ -48,7 +48,7 @@ from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.planning.design import _SCALE, DEFAULT_FREQUENCY_HZ, design_field, orient_phasors
-from ppod_ros.planning.envelope import fit_envelope
+from ppod_ros.planning.envelope import PlantTolerance, fit_envelope
 from ppod_ros.planning.predict import predict_velocities
 from ppod_ros.planning.specs import CENTRE_RADIUS_M, FieldSpec
 
@@ -64,6 +64,8 @@ class MpcSettings:
     frequency_hz: float = DEFAULT_FREQUENCY_HZ  # of the searched motions
     harmonics: int = 1                    # 1: 11 real inputs; 2: 23
     headroom: float = 0.15                # fraction under every device limit
+    plant_tolerance: PlantTolerance | None = PlantTolerance()  # actuator errors whose corrected tables must
+                                          # pass the checker too (planning/envelope.py); None: nominal only
     max_speed_mps: float = 0.008          # waypoint distance per horizon second
     max_turn_radps: float = 0.5           # angular waypoint per horizon second
     angle_weight_m_per_rad: float = 0.03  # an angle error of 1 rad costs as much as 30 mm
@@ -490,7 +492,7 @@ class MultiTask:
         refined, refined_cost = self._refine(start, poses, statuses)
         if refined is not None and refined_cost < best_cost:
             best_motion, best_cost = refined, refined_cost
-        best_motion, _scale = fit_envelope(best_motion, self.device, s.headroom)
+        best_motion, _scale = fit_envelope(best_motion, self.device, s.headroom, tolerance=s.plant_tolerance)
         final_cost, final_vel = self._costs([best_motion], poses, statuses)
         if not math.isfinite(float(final_cost[0])):
             if not math.isfinite(float(current_cost[0])):  # nothing safe found: stop the plate
@@ -687,7 +689,7 @@ class MultiTask:
                 if 0 < norm_t < floor:
                     vt = vt * (floor / norm_t)
                 trials.append(_to_motion(vt, freq, harmonics, name="mpc"))
-            trials = [fit_envelope(m, self.device, s.headroom)[0] for m in trials]
+            trials = [fit_envelope(m, self.device, s.headroom, tolerance=s.plant_tolerance)[0] for m in trials]
             costs, _ = self._costs(trials, poses, statuses)
             j = int(np.argmin(costs))
             if not costs[j] < best_cost:

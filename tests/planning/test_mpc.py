@@ -139,6 +139,43 @@ def test_envelope_keeps_headroom_under_every_limit():
         envelope.fit_envelope(small, device, 0.7)
 
 
+def test_corrections_for_plants_within_the_tolerance_pass_the_checker():
+    # Regression (the default demo, 0/3 parts reached): every planned motion left 15 % headroom, but
+    # the checker reads a corrected table through the nominal plant, where the correction that
+    # realises a sink on a plant 15 % off at the actuators looks like a motion with up to twice the
+    # contact-margin use; the generator scaled the corrections to nothing and the plate kept its
+    # 20-30 % first error, which threw the parts off the plate.
+    from ppod_ros.actuation.envelope import Envelope
+
+    device = default_device_config()
+    checker = Envelope(device)
+    G0 = checker.plant.frequency_response(30.0)
+    sink = PlateMotion.single(30.0, [16.0, 19.0, 1.2, 33.0, 28.0, 107.0], [0.1, 1.5, 1.0, 2.9, -0.4, 1.6])
+    rng = np.random.default_rng(11)  # other draws than the tolerance's own
+    plants = []
+    for _ in range(40):
+        g = (1 + rng.uniform(-0.15, 0.15, 6)) * np.exp(1j * np.radians(rng.uniform(-10, 10, 6)))
+        c = rng.uniform(-0.05, 0.05, (6, 6)) * (1 - np.eye(6))
+        plants.append(G0 @ np.diag(g) @ (np.eye(6) + c))
+
+    def worst_corrected(motion):  # the checker's plate-motion ratios for each plant's converged table
+        X = motion.phasors()[0]
+        return np.array([max(checker.check_table(30.0, np.linalg.solve(G, X)[None]).ratios[n]
+                             for n in ("limits.contact_margin_mps2", "limits.plate_accel_mps2",
+                                       "limits.plate_angular_accel_radps2")) for G in plants])
+
+    plain, _ = envelope.fit_envelope(sink.scaled(3.0), device, 0.15)
+    robust, scale = envelope.fit_envelope(sink.scaled(3.0), device, 0.15, tolerance=envelope.PlantTolerance())
+    assert checker.check_motion(robust).within(0.85)
+    over_plain, over_robust = worst_corrected(plain), worst_corrected(robust)
+    assert np.sum(over_plain > 1.0) >= 2             # the bug: corrections scaled back
+    assert np.all(over_robust <= 1.0)
+    ratios = envelope.corrected_motion_ratios(robust, device, envelope.PlantTolerance())
+    assert max(ratios.values()) <= 0.85 + 1e-9
+    with pytest.raises(ConfigError, match="gain"):
+        envelope.PlantTolerance(gain=0.7)
+
+
 def test_predict_uses_the_batched_solver_when_present(monkeypatch):
     import ppod_ros.physics as physics
 

@@ -15,9 +15,12 @@ Everything runs in this process on the full models (no ROS, no camera). Sections
   multipart    the model-predictive planner (MultiTask) against today's template planner (Task, the
                bracket only: it moves one chosen part) in the same run, closed as the stack
                closes it: poses at 10 Hz with tracker noise (0.05 mm, 0.1 deg) and 0.1 s latency,
-               the generator's 0.5 s ramp on every switch, a random plant error per scene (gain
-               +-15 %, phase +-10 deg, coupling +-5 %) that restarts with each new motion and
-               decays as the feedback's transient does, random friction per part in 0.2-0.45
+               the generator's 0.5 s ramp on every switch, random actuator errors per scene (gain
+               +-15 %, phase +-10 deg, coupling +-5 %, as the simulated device's drive) played
+               as the stack plays them (ActuatorPlantError: the feedback starts a new motion from
+               its learned plant after the first, corrects the rest from 1 s with a 1 s time
+               constant, and the generator's checker scales corrections back as it does on the
+               bus), random friction per part in 0.2-0.45
                (the planner's models say 0.3), the simulator's part separation. Random scenes per
                count of parts (1 = the bracket; 2 = + a washer; 3 = + a hex; 4 = + a tile):
                starts and goals within the 0.06 m disc, not overlapping by footprint, goals at
@@ -312,7 +315,7 @@ def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float)
     from ppod_ros.parts import part_from_dict
     from ppod_ros.planning import Task
     from ppod_ros.planning.mpc import MultiTask, PartGoal
-    from ppod_ros.planning.simulate import PlantError, run_on_dynamics
+    from ppod_ros.planning.simulate import ActuatorPlantError, run_on_dynamics
     from ppod_sim.ros_node import default_scene_path
     from ppod_sim.scene import ScenePart, load_scene
 
@@ -357,7 +360,7 @@ def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float)
                         task = Task(model_parts, 0, (g0.x_m, g0.y_m, g0.theta_rad), position_tol_m=pos_tol,
                                     angle_tol_rad=ang_tol, timeout_s=scene_s)
                     w0 = time.perf_counter()
-                    plant = PlantError.random(np.random.default_rng(sc["plant_seed"]))
+                    plant = ActuatorPlantError.random(np.random.default_rng(sc["plant_seed"]))
                     run = run_on_dynamics(task, true_parts, sc["starts"], horizon_s=scene_s + 1.0, ramp_s=0.5,
                                           latency_s=0.1, plant=plant,
                                           separate=_separation(scene_parts), seed=sc["plant_seed"] % 1000,

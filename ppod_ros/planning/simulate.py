@@ -9,7 +9,9 @@ contact lands where it is, at rest (as on the simulated device). Optionally, as 
 - ``ramp_s``: every switch is the generator's ramp (a linear crossfade of the phasors; across
   frequencies, down then up);
 - ``plant``: a :class:`PlantError` (gain, phase and coupling errors of the played motion) that
-  starts with each new motion and decays as the accelerometer feedback's transient does;
+  starts with each new motion and decays as the accelerometer feedback's transient does, or an
+  :class:`ActuatorPlantError`, the plant as the running stack plays it (actuator errors, the
+  feedback's learned start and transient, and the generator's checker scaling its corrections);
 - ``separate``: a callback that keeps parts out of each other after each step (the simulated
   device's ppod_sim.scene.separate; ppod_ros does not import the simulator).
 
@@ -66,6 +68,96 @@ class PlantError:
         return PlateMotion.from_phasors(motion.frequency_hz, motion.k, X, name=motion.name)
 
 
+@dataclass
+class ActuatorPlantError:
+    """The plant as the running stack plays it (the simulated device's drive, the accelerometer
+    feedback and the generator's checker), for closed loops without ROS.
+
+    The actuators play ``M`` times the commanded currents (per actuator gain and phase errors and
+    cross-coupling, as ``ppod_sim``'s drive), so a goal ``X`` played with the nominal feed-forward
+    alone is ``P X`` with ``P = G0 M G0^-1`` per harmonic. The feedback corrects a fraction ``s`` of
+    that error, ``X + (1 - s) (P X - X)``: from the correction its learned plant predicts (nothing for
+    the first ``unlearned_goals`` motions, then all but ``learned_residual``), and after
+    ``first_estimate_s`` (the ramp, settling and the first estimate) the rest with time constant
+    ``decay_s`` (the learning iterations). The generator applies at most the fraction ``s_max`` of
+    the correction for which its checker, reading the table through the nominal plant, keeps every
+    limit (computed per motion by bisection, as the generator scales a correction back).
+    """
+
+    M: np.ndarray                         # (6, 6) complex actuator error matrix
+    device: object
+    unlearned_goals: int = 1
+    learned_residual: float = 0.1
+    first_estimate_s: float = 1.0
+    decay_s: float = 1.0
+
+    def __post_init__(self):
+        from ppod_ros.actuation.envelope import Envelope
+
+        self._checker = Envelope(self.device)
+        self._smax: dict[bytes, float] = {}
+        self.scaled_motions = 0               # motions whose corrections the checker scaled back
+
+    @classmethod
+    def random(cls, rng: np.random.Generator, device=None, gain: float = 0.15, phase_deg: float = 10.0,
+               coupling: float = 0.05, **kwargs) -> ActuatorPlantError:
+        from ppod_ros.device import default_device_config
+
+        g = 1.0 + rng.uniform(-gain, gain, 6)
+        ph = np.radians(rng.uniform(-phase_deg, phase_deg, 6))
+        C = rng.uniform(-coupling, coupling, (6, 6))
+        np.fill_diagonal(C, 0.0)
+        return cls(np.diag(g * np.exp(1j * ph)) @ (np.eye(6) + C), device or default_device_config(), **kwargs)
+
+    def _maps(self, motion):
+        G0 = self._checker.plant.frequency_response(motion.frequency_hz * motion.k.astype(float))  # (K, 6, 6)
+        return G0, np.linalg.inv(G0)
+
+    def uncorrected(self, motion):
+        """``P X``: the motion the nominal feed-forward alone plays."""
+        G0, G0inv = self._maps(motion)
+        X = np.einsum("kij,jl,klm,km->ki", G0, self.M, G0inv, motion.phasors())
+        return PlateMotion.from_phasors(motion.frequency_hz, motion.k, X, name=motion.name)
+
+    def max_correction(self, motion) -> float:
+        """The largest fraction of the full correction the generator's checker lets through."""
+        key = motion.key
+        if key not in self._smax:
+            G0, G0inv = self._maps(motion)
+            X = motion.phasors()
+            ff = np.einsum("kij,kj->ki", G0inv, X)
+            full = np.einsum("ij,kjl,kl->ki", np.linalg.inv(self.M), G0inv, X) - ff
+            kmax = int(motion.k.max())
+
+            def ok(s: float) -> bool:
+                table = np.zeros((kmax, 6), complex)
+                table[motion.k - 1] = ff + s * full
+                return self._checker.check_table(motion.frequency_hz, table).within(1.0)
+
+            if ok(1.0):
+                s_max = 1.0
+            else:
+                lo, hi = 0.0, 1.0
+                for _ in range(10):
+                    mid = 0.5 * (lo + hi)
+                    lo, hi = (mid, hi) if ok(mid) else (lo, mid)
+                s_max = lo
+                self.scaled_motions += 1
+            self._smax[key] = s_max
+        return self._smax[key]
+
+    def played(self, motion, since_switch_s: float, goal_number: int):
+        if motion is None or motion.is_zero():
+            return motion
+        start = 0.0 if goal_number <= self.unlearned_goals else 1.0 - self.learned_residual
+        t = max(0.0, since_switch_s - self.first_estimate_s)
+        s = min(self.max_correction(motion), 1.0 - (1.0 - start) * math.exp(-t / self.decay_s)
+                if since_switch_s >= self.first_estimate_s else start)
+        P = self.uncorrected(motion).phasors()
+        X = motion.phasors()
+        return PlateMotion.from_phasors(motion.frequency_hz, motion.k, X + (1.0 - s) * (P - X), name=motion.name)
+
+
 def _blend(old, new, a: float):
     """The generator's ramp from ``old`` to ``new`` at fraction ``a`` (0..1)."""
     if a >= 1.0 or old is None:
@@ -98,7 +190,7 @@ class SimulatedRun:
 def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | RigidPart], starts, *,
                     horizon_s: float = 60.0, dt_s: float = 0.1, position_noise_m: float = 5e-5,
                     angle_noise_rad: float = math.radians(0.1), seed: int = 0, latency_s: float = 0.0,
-                    ramp_s: float = 0.0, plant: PlantError | None = None,
+                    ramp_s: float = 0.0, plant: PlantError | ActuatorPlantError | None = None,
                     separate: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
                     keep_steps: bool = False) -> SimulatedRun:
     """Step ``task`` every ``dt_s`` on the parts' poses until it ends or ``horizon_s`` passes.
@@ -153,4 +245,4 @@ def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | Rig
                         steps if keep_steps else None, tuple(switches))
 
 
-__all__ = ["PlantError", "SimulatedRun", "run_on_dynamics"]
+__all__ = ["ActuatorPlantError", "PlantError", "SimulatedRun", "run_on_dynamics"]

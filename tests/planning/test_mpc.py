@@ -254,3 +254,30 @@ def test_keep_clear_predicts_the_uncommanded_parts_where_the_candidate_takes_the
             assert vel_all[0, 1, 0] < 0
         costs[keep] = float(task._costs([sink], poses, statuses)[0][0])
     assert costs[True] > costs[False] + 0.005  # the predicted collision is penalised
+
+
+def test_the_stack_plant_model_plays_what_the_feedback_and_the_checker_allow():
+    from ppod_ros.planning.simulate import ActuatorPlantError
+
+    device = default_device_config()
+    sink = PlateMotion.single(30.0, [16.0, 19.0, 1.2, 33.0, 28.0, 107.0], [0.1, 1.5, 1.0, 2.9, -0.4, 1.6])
+    plain, _ = envelope.fit_envelope(sink.scaled(3.0), device, 0.15)
+    plant = ActuatorPlantError.random(np.random.default_rng(5), device)
+    w = np.array([1, 1, 1, 0.1, 0.1, 0.1])
+
+    def error(played, goal):
+        return np.linalg.norm(w * (played.phasors() - goal.phasors())) / np.linalg.norm(w * goal.phasors())
+
+    first = error(plant.uncorrected(plain), plain)
+    assert 0.1 < first < 0.3                               # 15 % actuator errors, seen on the plate
+    assert error(plant.played(plain, 0.5, 1), plain) == pytest.approx(first)  # no estimate yet
+    s_max = plant.max_correction(plain)
+    assert 0.5 < s_max < 0.9 and plant.scaled_motions == 1  # this plant's corrections are scaled back
+    late = error(plant.played(plain, 30.0, 1), plain)
+    assert late == pytest.approx((1 - s_max) * first, rel=1e-6)  # converged as far as the checker lets it
+    assert error(plant.played(plain, 0.5, 2), plain) == pytest.approx(late, rel=1e-6)  # learned start, capped
+    robust, _ = envelope.fit_envelope(sink.scaled(3.0), device, 0.15, tolerance=envelope.PlantTolerance())
+    assert plant.max_correction(robust) > s_max
+    small = sink.scaled(0.3)
+    assert plant.max_correction(small) == 1.0
+    assert error(plant.played(small, 0.5, 2), small) == pytest.approx(0.1 * error(plant.uncorrected(small), small))

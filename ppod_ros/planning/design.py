@@ -7,7 +7,8 @@ model) and the target over a sample grid on the working disc, plus penalties tha
 inside the device's limits (peak plate acceleration, peak angular acceleration, contact margin
 min(g + a_n) over the working disc). scipy.optimize.least_squares (trust region reflective, finite
 differences) starts from the linear superposition of basis fields below; the result is checked by
-the waveform generator's own GoalPlanner.plan and scaled down until it passes.
+the waveform generator's own GoalPlanner.plan and scaled down until it passes, and until the
+feedback's corrections for actuator errors within the plant tolerance pass too (planning/envelope.py).
 
 Basis fields at 30 Hz, mu 0.3 (found with the solver; tests/planning check the signs):
   translation   a_x = A, a_z = Z i             v = (-c A Z, 0)       (c about 3.1e-4 s^3/m)
@@ -355,6 +356,17 @@ def _within_limits(motion: PlateMotion, spec: FieldSpec, point: PointPart, devic
     if scale != 1.0:
         messages.append(f"scaled by {scale:.3f} to stay within the limits ({first})")
         motion = motion.scaled(scale)
+    # Room for the feedback: the corrected tables of plants within the actuator tolerance must pass
+    # the checker too, or the generator scales the corrections back and the plate keeps its error
+    # (planning/envelope.py). Ratios are linear in amplitude: one scale fits.
+    from ppod_ros.planning.envelope import PlantTolerance, corrected_motion_ratios
+
+    ratios = corrected_motion_ratios(motion, device, PlantTolerance())
+    name, worst = max(ratios.items(), key=lambda kv: kv[1])
+    if worst > 1.0:
+        motion = motion.scaled(1.0 / worst)
+        messages.append(f"scaled by {1.0 / worst:.3f} so that its corrections for actuator errors within the "
+                        f"plant tolerance stay within {name}")
     result = evaluate(motion, spec, point)
     result.messages = messages + result.messages
     return result

@@ -69,6 +69,9 @@ class MpcSettings:
     max_speed_mps: float = 0.008          # waypoint distance per horizon second
     max_turn_radps: float = 0.5           # angular waypoint per horizon second
     angle_weight_m_per_rad: float = 0.03  # an angle error of 1 rad costs as much as 30 mm
+    angle_from_m: float = 0.01            # ... within this distance of the goal; farther, the angle weight
+                                          # falls as this distance over the part's (transport first: a sink
+                                          # that carries the bracket home spins it, the turn comes near the end)
     hold_weight: float = 3.0              # parts within tolerance: weight of staying put
     hold_release: float = 1.5             # ... until out by this many tolerances (hysteresis)
     region_radius_m: float = 0.065        # predicted positions beyond this (and beyond the part's own) rule
@@ -244,13 +247,8 @@ def _template_rotation(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> 
     if goal.theta_rad is None:
         return None
     ang = float(_wrap(pose[2] - goal.theta_rad, planner.symmetry[goal.index]))
-    base = planner._base("rotation")
-    X = base.phasor_table(1).copy() * (1.0 if ang < 0 else -1.0)
-    x0, y0 = float(pose[0]), float(pose[1])
-    X[:, 0] += X[:, 5] * y0
-    X[:, 1] -= X[:, 5] * x0
-    X[:, 2] += X[:, 4] * x0 - X[:, 3] * y0
-    return PlateMotion.from_phasors(base.frequency_hz, [1], X, name=f"turn@{goal.index}")
+    return rotation_about(planner._base("rotation"), float(pose[0]), float(pose[1]), 1.0 if ang < 0 else -1.0,
+                          f"turn@{goal.index}")
 
 
 def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion | None:
@@ -264,6 +262,16 @@ def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> Pl
 
 TEMPLATES: dict[str, Callable] = {"sink": _template_sink, "rotation": _template_rotation,
                                   "orient": _template_orient}
+
+
+def rotation_about(base: PlateMotion, x0: float, y0: float, sign: float, name: str) -> PlateMotion:
+    """The rotation template (designed about the centre) about (x0, y0), turning with ``sign``: exact
+    shifts of the in-plane and normal accelerations (a rigid plate's acceleration at r - r0)."""
+    X = base.phasor_table(1).copy() * sign
+    X[:, 0] += X[:, 5] * y0
+    X[:, 1] -= X[:, 5] * x0
+    X[:, 2] += X[:, 4] * x0 - X[:, 3] * y0
+    return PlateMotion.from_phasors(base.frequency_hz, [1], X, name=name)
 
 
 def template_motion(kind: str, planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion | None:
@@ -484,6 +492,13 @@ class MultiTask:
         costs, vels = self._costs(candidates, poses, statuses)
         costs = np.concatenate([current_cost, costs])
         pool = [self.current] + candidates
+        if any(not self.state[g.index].holding for g in self.goals if g.index not in self.unseen):
+            # The plate at rest holds every part but brings none closer: while a part is out of
+            # tolerance it is no option, or a horizon on which every motion moves some part away
+            # keeps the plate at rest for good (measured: 54 s of a 60 s benchmark scene).
+            costs = np.where([m.is_zero() for m in pool], np.inf, costs)
+            if self.current.is_zero():
+                current_cost = np.full_like(current_cost, np.inf)
         best = int(np.argmin(costs))
         best_motion, best_cost = pool[best], float(costs[best])
         # Gauss-Newton from the best start at its frequency (templates at another frequency only
@@ -571,6 +586,13 @@ class MultiTask:
                 weight[k] = s.hold_weight
         return way, weight
 
+    def _angle_weights(self, statuses: list[PartStatus]) -> np.ndarray:
+        """Per goal, the weight of an angle error (m/rad): full within ``angle_from_m`` of the goal,
+        falling as angle_from_m / distance beyond it."""
+        s = self.settings
+        d = np.array([st.position_error_m if math.isfinite(st.position_error_m) else 0.0 for st in statuses])
+        return s.angle_weight_m_per_rad * np.minimum(1.0, s.angle_from_m / np.maximum(d, 1e-9))
+
     def _costs(self, motions: Sequence[PlateMotion], poses: np.ndarray, statuses: list[PartStatus]
                ) -> tuple[np.ndarray, np.ndarray]:
         """Cost (M,) (inf where contact is lost at a commanded part) and model velocities (M, G, 3)."""
@@ -605,7 +627,7 @@ class MultiTask:
         pred = cur[None] + scales[None, :, None] * (v_cur[None] * (0.5 * r) + vel * (H - 0.5 * r))  # (M, G, 3)
         res_xy = (pred[..., :2] - way[None, :, :2]) * weight[None, :, None]
         oriented = np.array([g.theta_rad is not None for g in self.goals], float)
-        res_th = (pred[..., 2] - way[None, :, 2]) * s.angle_weight_m_per_rad * oriented[None] * weight[None]
+        res_th = (pred[..., 2] - way[None, :, 2]) * self._angle_weights(statuses)[None] * oriented[None] * weight[None]
         parts = [res_xy.reshape(M, -1), res_th]
         # Collisions between predicted positions (commanded parts, and the others if asked).
         idx = [g.index for g in self.goals]
@@ -723,7 +745,12 @@ class MultiTask:
 
         text = (f"done in {elapsed:.1f} s: " + ", ".join(one(st) for st in statuses)) if failed is None \
             else f"failed: {failed}"
-        self.finished = MultiStep(None, "failed" if failed else "done", failed is None, failed, d, a, text,
+        stop = None
+        if failed is None and not self.current.is_zero():
+            # Done while a motion plays (every part settled within tolerance before the planner
+            # stopped the plate): the plate at rest holds them there.
+            stop = self.current = PlateMotion.zero(self.current.frequency_hz, name="rest")
+        self.finished = MultiStep(stop, "failed" if failed else "done", failed is None, failed, d, a, text,
                                   tuple(statuses))
         return self.finished
 

@@ -140,7 +140,7 @@ class _Rig:
             self.advance(0.05)
             for s in self.summaries:
                 res = self.loop.on_summary(s.k, s.phasors, goal.frequency_hz, s.samples_per_cycle,
-                                           self.device.time_s)
+                                           self.device.time_s, s.table_seq)
                 if res is None or res.step is None:
                     continue
                 yield res
@@ -149,6 +149,49 @@ class _Rig:
                     self.summaries.clear()
                     return
             self.summaries.clear()
+
+
+def run_latency(goal, seed: int, latency_s: float, iterations: int = 6, tables: bool = True
+                ) -> list[tuple[int, float, int]]:
+    """``goal`` as the running stack learns it, with ``latency_s`` (device time) on each path.
+
+    The loop takes the goal up as it starts ramping in (as accel_feedback does); every summary
+    reaches the loop and every correction reaches the generator ``latency_s`` late (the CAN bridge,
+    DDS, a busy node). ``tables`` False hides the summaries' table numbers from the loop (as a
+    caller that does not pass them). Returns ``(iteration, estimated error, device table of the
+    estimate's last summary)`` per learning step.
+    """
+    from collections import deque
+
+    rig = _Rig(seed)
+    steps: list[tuple[int, float, int]] = []
+    try:
+        out = rig.gen.submit(goal)
+        if not out.accepted:
+            raise RuntimeError(f"{goal.name}: {out.reason}")
+        rig.loop.set_goal(goal, rig.device.time_s, ramp_left_fraction=1.0)
+        rig.summaries.clear()
+        summaries, corrections = deque(), deque()
+        while rig.device.time_s < 30.0 and (not steps or steps[-1][0] < iterations):
+            rig.link.heartbeat()
+            rig.device.advance(0.01)
+            rig.link.poll()
+            now = rig.device.time_s
+            summaries.extend((now + latency_s, s) for s in rig.summaries)
+            rig.summaries.clear()
+            while corrections and corrections[0][0] <= now:
+                step = corrections.popleft()[1]
+                rig.gen.apply_correction(goal.key, step.k, step.correction_a)
+            while summaries and summaries[0][0] <= now:
+                s = summaries.popleft()[1]
+                res = rig.loop.on_summary(s.k, s.phasors, goal.frequency_hz, s.samples_per_cycle, now,
+                                          s.table_seq if tables else None)
+                if res is not None and res.step is not None:
+                    steps.append((res.step.iteration, res.step.error_relative, s.table_seq))
+                    corrections.append((now + latency_s, res.step))
+    finally:
+        rig.close()
+    return steps
 
 
 #: Largest envelope ratio of a suite motion scaled down to fit the device (room for corrections).

@@ -64,6 +64,11 @@ class OnlineSettings:
     settle_s: float = 0.6
     control: bool = True
     estimator_harmonics: int = 6
+    #: After a correction the loop measures only the device's next table (the summaries name the
+    #: table they were computed on): summaries of the table it was sent from are not the
+    #: correction's effect, however late the generator applies it. If no new table arrives within
+    #: this time (s, device) after the step (a correction refused), the loop measures what plays.
+    table_wait_s: float = 2.0
     #: The device (docs/device.md) defines the plate's motion as the acceleration and angular
     #: acceleration of the plate frame expressed in that frame: only the centripetal and the
     #: tilted-gravity terms separate a reading from it. The estimator's "frame" and "euler" terms
@@ -81,6 +86,7 @@ class OnlineSettings:
             control=f.boolean("control", cls.control),
             estimator_harmonics=f.integer("estimator_harmonics", cls.estimator_harmonics, min_value=1,
                                           max_value=10),
+            table_wait_s=f.number("table_wait_s", cls.table_wait_s, min_value=0.0, unit="s"),
         )
         f.finish()
         return out
@@ -96,11 +102,14 @@ class LoopOutput:
     stored: bool = False
     #: The feedback's channel set changed with this estimate (learning restarted), else None.
     channel_change: ChannelSetChange | None = None
+    #: The device table the estimate's summaries were computed on (None when not known).
+    table_seq: int | None = None
 
 
 @dataclass
 class _Collect:
     k: np.ndarray | None = None
+    table_seq: int | None = None
     phasors: list[np.ndarray] = field(default_factory=list)
 
 
@@ -161,6 +170,10 @@ class FeedbackLoop:
         self.initial_source = ""
         self._resume_s = math.inf
         self._collect = _Collect()
+        # The table the last control step was measured on, while the loop waits for the next one
+        # (None: not waiting), and the device time of that step.
+        self._sent_from: int | None = None
+        self._step_s = -math.inf
 
     def _make_estimator(self) -> AccelEstimator:
         """The estimator: the calibration's allowance, else the learned one once ready, else the default."""
@@ -184,6 +197,7 @@ class FeedbackLoop:
         """
         self.goal = motion
         self._collect = _Collect()
+        self._sent_from = None
         self._resume_s = now_s + self.settings.settle_s
         self.controller = None
         self.initial_source = ""
@@ -232,16 +246,26 @@ class FeedbackLoop:
         return phasors / high_pass_response(np.asarray(k) * frequency_hz, acc.ac_coupling_hz, dt)[:, None]
 
     def on_summary(self, k: np.ndarray, phasors: np.ndarray, frequency_hz: float, samples_per_cycle: int,
-                   now_s: float) -> LoopOutput | None:
-        """Feed one summary (harmonics ``k``, phasors (K, C)); returns an output when one is ready."""
+                   now_s: float, table_seq: int | None = None) -> LoopOutput | None:
+        """Feed one summary (harmonics ``k``, phasors (K, C)); returns an output when one is ready.
+
+        ``table_seq`` is the device table the summary was computed on (``AccelSummary.table_seq``):
+        when given, a control step's next estimate uses only summaries of a later table, from
+        ``settle_s`` after it first shows (a correction the generator applies late is never
+        measured before it plays), and an estimate never mixes two tables.
+        """
+        if table_seq is not None and not self._new_table(int(table_seq), now_s):
+            return None
         if now_s < self._resume_s:
             return None
         k = np.asarray(k, dtype=int)
         if frequency_hz <= 0 or not math.isfinite(frequency_hz):
             raise ConfigError(f"frequency_hz: must be a positive frequency, got {frequency_hz}")
-        if self._collect.k is not None and not np.array_equal(self._collect.k, k):
+        if (self._collect.k is not None and not np.array_equal(self._collect.k, k)) or \
+                self._collect.table_seq != table_seq:
             self._collect = _Collect()
         self._collect.k = k
+        self._collect.table_seq = table_seq
         self._collect.phasors.append(self.compensate(k, np.asarray(phasors, complex), frequency_hz,
                                                      samples_per_cycle))
         if len(self._collect.phasors) < self.settings.summaries_per_estimate:
@@ -259,7 +283,7 @@ class FeedbackLoop:
             active = list(self.channels.active)
             cols = self.estimator.layout.index(active)
             estimate = self.estimator.from_summaries(k, stack[..., cols], frequency_hz, channels=active)
-        out = LoopOutput(estimate, goal=self.goal, channel_change=change)
+        out = LoopOutput(estimate, goal=self.goal, channel_change=change, table_seq=table_seq)
         if change is not None and self.controller is not None:
             # Learning restarts from the correction applied now (the plate keeps its table): the
             # history and states were measured with another channel set.
@@ -277,4 +301,23 @@ class FeedbackLoop:
                 out.stored = True
             # The next measurement must see the new table, after its crossfade and the plate's transient.
             self._resume_s = now_s + self.settings.settle_s
+            self._sent_from, self._step_s = table_seq, now_s
         return out
+
+    def _new_table(self, table_seq: int, now_s: float) -> bool:
+        """False while the summaries still show the table the last step was measured on.
+
+        The first summary of another table restarts the settling time from now (device time): the
+        correction reached the plate then, not when the step was taken. After ``table_wait_s``
+        without a new table (the generator refused the correction) the loop measures what plays.
+        """
+        if self._sent_from is None:
+            return True
+        if table_seq == self._sent_from:
+            if now_s - self._step_s < self.settings.table_wait_s:
+                return False
+        else:
+            self._resume_s = max(self._resume_s, now_s + self.settings.settle_s)
+        self._sent_from = None
+        self._collect = _Collect()
+        return True

@@ -65,6 +65,8 @@ class AccelFeedbackNode(PpodLifecycleNode):
         Param("learn_plant", True, "learn the plant online and start each new goal from the correction it predicts"),
         Param("plant_prior_weight_a2", 0.01, "ridge weight of the nominal plant in the learned one (A^2)",
               min_value=1e-9),
+        Param("plant_coupling_weight_a2", 0.1, "ridge weight of actuator cross-coupling in the learned plant (A^2)",
+              min_value=1e-9),
         Param("plant_forgetting", 0.95, "weight kept by earlier plant samples per new one", min_value=1e-3,
               max_value=1.0),
         Param("channel_drop_after", 3, "estimates a channel must be dropped in before it leaves the set",
@@ -102,7 +104,8 @@ class AccelFeedbackNode(PpodLifecycleNode):
         cache = Path(params["cache_dir"]).expanduser() if params["cache_dir"] else Path.home() / ".cache" / "ppod"
         plant_learning = PlantLearningSettings(enabled=params["learn_plant"],
                                                prior_weight_a2=params["plant_prior_weight_a2"],
-                                               forgetting=params["plant_forgetting"])
+                                               forgetting=params["plant_forgetting"],
+                                               coupling_weight_a2=params["plant_coupling_weight_a2"])
         calibration = load_calibration(cache, config.name) if params["use_calibration"] else None
         self.get_logger().info(f"accelerometer calibration: {calibration_path(cache, config.name)}"
                                if calibration is not None else "accelerometer calibration: none (nominal layout)")

@@ -27,15 +27,15 @@ from typing import Any
 
 import numpy as np
 
-from ppod_ros.actuation.planning import GoalPlanner
+from ppod_ros.actuation.planning import GoalPlan, GoalPlanner
 from ppod_ros.config.fields import Fields
 from ppod_ros.control.learned_plant import PlantLearner, PlantLearningSettings
 from ppod_ros.control.learning import DIVERGED, LearningController, LearningSettings
-from ppod_ros.control.limits import DeviceLimits
+from ppod_ros.control.limits import DeviceLimits, LimitEvent, LimitFunction, LimitReport
 from ppod_ros.control.plant import PlantModel
 from ppod_ros.control.store import CorrectionStore
 from ppod_ros.device.schema import DeviceConfig
-from ppod_ros.errors import ConfigError
+from ppod_ros.errors import ConfigError, LimitError
 from ppod_ros.estimation import AccelCalibration, AccelEstimator, PlateEstimate
 from ppod_ros.estimation.channel_set import ChannelSet, ChannelSetChange, ChannelSetSettings
 from ppod_ros.estimation.misfit import MisfitHistory
@@ -174,6 +174,7 @@ class FeedbackLoop:
         # (None: not waiting), and the device time of that step.
         self._sent_from: int | None = None
         self._step_s = -math.inf
+        self._table: int | None = None  # the device table the summaries showed last
 
     def _make_estimator(self) -> AccelEstimator:
         """The estimator: the calibration's allowance, else the learned one once ready, else the default."""
@@ -204,6 +205,7 @@ class FeedbackLoop:
         if motion is None or motion.is_zero() or not self.settings.control:
             return
         plan = self.planner.plan(motion)
+        limits = self.config.limits
         self._resume_s += min(max(ramp_left_fraction, 0.0), 1.0) * plan.ramp_s
         # Every row of the generator's table is controlled: the goal's harmonics, 1..3 and the
         # third-order distortion products (GoalPlanner's table_size).
@@ -218,9 +220,36 @@ class FeedbackLoop:
             initial = self._predicted_correction(motion, plant, k, ff)
             self.initial_source = "predicted" if initial is not None else ""
         if initial is not None:
-            initial = self.start_limits.apply(np.zeros_like(initial), initial, ff)[0]
-        self.controller = LearningController(motion, plant, self.limits, self.learning,
+            initial = self._as_generator(plan, self.start_limits, limits.start_correction_a)(
+                np.zeros_like(initial), initial, ff)[0]
+            if not np.any(initial):
+                initial = None
+        self.controller = LearningController(motion, plant, self._as_generator(plan, self.limits), self.learning,
                                              feedforward_a=ff, initial_correction_a=initial, harmonics=kc)
+
+    def _as_generator(self, plan: GoalPlan, own: DeviceLimits, step_cap_a: float | None = None) -> LimitFunction:
+        """The controller's limits: its own, then exactly what the generator will do with the result.
+
+        The generator holds every corrected table to the device envelope (through the nominal plant)
+        and scales a step back when it would not fit (:mod:`ppod_ros.actuation.corrections`). The
+        same function on the same plan gives the loop the correction the plate will really play, so
+        the controller continues from it and the plant learner pairs each measurement with the
+        currents that made it (pairing it with the currents asked for taught the learner a plant
+        that predicted the next goals' starting corrections 10-20 % off).
+        """
+        def limit(previous: np.ndarray, proposed: np.ndarray, feedforward: np.ndarray):
+            correction, report = own.apply(previous, proposed, feedforward)
+            try:
+                result = self.planner.correct(plan, correction, previous=previous, step_cap_a=step_cap_a)
+            except (ConfigError, LimitError) as exc:
+                event = LimitEvent(f"generator: {exc}", -1, 0.0, 1.0)
+                return previous.copy(), LimitReport(report.events + (event,))
+            if result.limited_by is not None:
+                event = LimitEvent(f"envelope {result.limited_by}", -1, result.scale, 1.0)
+                report = LimitReport(report.events + (event,))
+            return result.applied_a, report
+
+        return limit
 
     def _predicted_correction(self, motion: PlateMotion, plant: PlantModel, k: np.ndarray, ff: np.ndarray
                               ) -> np.ndarray | None:
@@ -307,12 +336,23 @@ class FeedbackLoop:
     def _new_table(self, table_seq: int, now_s: float) -> bool:
         """False while the summaries still show the table the last step was measured on.
 
-        The first summary of another table restarts the settling time from now (device time): the
-        correction reached the plate then, not when the step was taken. After ``table_wait_s``
-        without a new table (the generator refused the correction) the loop measures what plays.
+        Every change of table restarts the settling time from now (device time): a correction
+        reaches the plate when its table first shows, not when the step was taken; and a table the
+        loop did not cause (the next goal, sent before its status reached the loop) is never
+        measured as the effect of this goal's command. After ``table_wait_s`` without a new table
+        (the generator refused the correction) the loop measures what plays.
         """
-        if self._sent_from is None:
-            return True
+        if self._sent_from is not None and table_seq == self._sent_from:
+            if now_s - self._step_s < self.settings.table_wait_s:
+                return False
+            self._sent_from = None
+        if table_seq != self._table:
+            if self._table is not None:
+                self._resume_s = max(self._resume_s, now_s + self.settings.settle_s)
+                self._collect = _Collect()
+            self._table = table_seq
+            self._sent_from = None
+        return True
         if table_seq == self._sent_from:
             if now_s - self._step_s < self.settings.table_wait_s:
                 return False

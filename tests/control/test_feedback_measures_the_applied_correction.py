@@ -33,3 +33,23 @@ def test_without_table_numbers_the_loop_measures_the_table_before_its_correction
     # step, no table numbers) measured the old table, or old and new mixed, and took the step again.
     steps = run_latency(LINESINKX, seed=7, latency_s=0.3, iterations=5, tables=False)
     assert min(e for _, e, _ in steps) > 0.01, steps
+
+
+def test_the_controller_and_the_plant_learner_continue_from_what_the_generator_applies():
+    # On this device (seed 2) the generator scales LineSinkX's corrections back to the envelope (the
+    # contact margin, judged through the nominal plant). The loop limits each step exactly as the
+    # generator will, so its correction, and the currents the plant learner pairs with each
+    # measurement, are the ones the plate plays, and the scaling is reported in the step.
+    from ppod_bench.feedback import _Rig
+
+    rig = _Rig(2)
+    try:
+        assert rig.gen.submit(LINESINKX).accepted
+        rig.advance(0.9)
+        rig.start(LINESINKX)
+        steps = [res.step for res in rig.iterate(LINESINKX, lambda r: r.step.iteration >= 3)]
+        np.testing.assert_allclose(rig.loop.controller.correction_a, rig.gen.applied_correction_a, atol=1e-9)
+        assert any(e.actuator < 0 and "envelope" in e.limit for s in steps for e in s.limits.events), \
+            [s.limits.describe() for s in steps]
+    finally:
+        rig.close()

@@ -24,6 +24,7 @@ examples:
   ppod bench feedback
   ppod bench feedback --seeds 1 2 3
   ppod bench feedback --motions config/motions/LineSinkX.yaml --quick
+  ppod bench feedback --sections switching --seeds 1 2
 """
 
 from __future__ import annotations
@@ -48,7 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-sequence", action="store_true", help="skip the goal-sequence section")
     parser.add_argument("--sections", nargs="+", choices=sorted(SECTIONS), default=["motions", "sequence"],
                         help="sections to run (default: motions sequence); real: the PPOD2 lab's data "
-                             "(estimation against the lab, injected faults, dead acquisitions, calibration)")
+                             "(estimation against the lab, injected faults, dead acquisitions, calibration); "
+                             "switching: goals switched every 1.5 s as the planner does")
     parser.add_argument("--uncalibrated", action="store_true",
                         help="feedback on the nominal layout (no array calibration) despite the sensor errors")
 
@@ -192,6 +194,102 @@ def run_latency(goal, seed: int, latency_s: float, iterations: int = 6, tables: 
     finally:
         rig.close()
     return steps
+
+
+def switching_goals(n: int, seed: int) -> list:
+    """``n`` goals as the model-predictive planner switches them: each the template designs of
+    :func:`planner_sequence` with every axis's phase turned at random and 30 % of random motion
+    added, fitted to the envelope with the planner's 15 % headroom, 0.5 s ramps, all named "mpc"."""
+    from ppod_ros.device import default_device_config
+    from ppod_ros.motion import PlateMotion
+    from ppod_ros.planning.envelope import fit_envelope
+
+    rng = np.random.default_rng(seed)
+    base, config, out = planner_sequence(), default_device_config(), []
+    for _ in range(n):
+        P = base[rng.integers(len(base))].phasor_table(1)[0]
+        P = P * np.exp(1j * rng.uniform(0, 2 * np.pi, 6)) + rng.normal(size=6) * np.abs(P).mean() * 0.3
+        goal = PlateMotion(30, [1], [np.abs(P)], [np.angle(P)], ramp_time_s=0.5, name="mpc")
+        out.append(fit_envelope(goal, config, 0.15)[0])
+    return out
+
+
+def run_switching(seed: int, goals: int = 12, dwell_s: float = 1.5, status_latency_s: float = 0.1,
+                  latency_s: float = 0.05) -> list[dict]:
+    """Goals switched every ``dwell_s`` as the planner does, with the running stack's latencies.
+
+    The feedback takes each goal up ``status_latency_s`` after the generator accepts it (its status
+    message) and sends the starting correction; summaries and corrections travel ``latency_s``; a
+    correction is applied to whatever goal is active (the generator matches corrections by goal
+    name, and the planner names every goal "mpc"). Per goal: the true plate's error at the loop's
+    first learning step (``first``: all harmonics; ``first_fundamental``: the goal's own), or None
+    when the goal ended before one.
+    """
+    import heapq
+
+    rig = _Rig(seed)
+    queue: list = []
+    order = itertools.count()
+    rows: dict[int, dict] = {}
+    current: dict = {"goal": None, "index": -1}
+
+    def later(delay_s: float, fn) -> None:
+        heapq.heappush(queue, (rig.device.time_s + delay_s, next(order), fn))
+
+    def take_up(index: int, goal) -> None:
+        current.update(goal=goal, index=index)
+        rig.loop.set_goal(goal, rig.device.time_s, ramp_left_fraction=1.0)
+        initial, k = rig.loop.initial_correction_a, None if rig.loop.controller is None else rig.loop.controller.k
+        if initial is not None:
+            later(latency_s, lambda: rig.gen.apply_correction(None, k, initial, start=True))
+
+    def feed(summary) -> None:
+        goal = current["goal"]
+        if goal is None:
+            return
+        res = rig.loop.on_summary(summary.k, summary.phasors, goal.frequency_hz, summary.samples_per_cycle,
+                                  rig.device.time_s, summary.table_seq)
+        if res is None or res.step is None:
+            return
+        if current["index"] not in rows:
+            truth = rig.device.last_truth().accel
+            g = goal.phasor_table(1)[0]
+            rows[current["index"]] = {
+                "first": rig.true_error(goal)[0], "source": rig.loop.initial_source or "none",
+                "first_fundamental": float(np.linalg.norm((truth[0] - g) * rig.scale) / np.linalg.norm(g * rig.scale))}
+        step = res.step
+        later(latency_s, lambda: rig.gen.apply_correction(None, step.k, step.correction_a))
+
+    goals_list = switching_goals(goals, seed)
+    try:
+        for index, goal in enumerate(goals_list):
+            if not rig.gen.submit(goal).accepted:
+                continue
+            later(status_latency_s, lambda i=index, g=goal: take_up(i, g))
+            end = rig.device.time_s + dwell_s
+            while rig.device.time_s < end:
+                rig.link.heartbeat()
+                rig.device.advance(0.01)
+                rig.link.poll()
+                for summary in rig.summaries:
+                    later(latency_s, lambda s=summary: feed(s))
+                rig.summaries.clear()
+                while queue and queue[0][0] <= rig.device.time_s:
+                    heapq.heappop(queue)[2]()
+    finally:
+        rig.close()
+    return [{"goal": i, **rows.get(i, {"first": None})} for i in range(len(goals_list))]
+
+
+def _switching_section(args: argparse.Namespace, out: Path) -> list[dict]:
+    runs = [{"seed": seed, "goals": run_switching(seed)} for seed in args.seeds]
+    print("\nGoals switched every 1.5 s as the planner does (random template-like goals, 0.5 s ramps, stack "
+          "latencies): true error at each goal's first learning step, all harmonics (the goal's own)")
+    for r in runs:
+        cells = ["-" if g["first"] is None else f"{100 * g['first']:.1f} ({100 * g['first_fundamental']:.1f})"
+                 for g in r["goals"]]
+        print(f"  seed {r['seed']}: " + ", ".join(cells))
+    return runs
 
 
 #: Largest envelope ratio of a suite motion scaled down to fit the device (room for corrections).
@@ -479,4 +577,4 @@ def _calibration_section(args: argparse.Namespace, out: Path) -> dict:
 
 REAL_DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "ppod2_real_subset.json"
 SECTIONS = {"motions": _motions_section, "sequence": _sequence_section, "real": _real_section,
-            "calibration": _calibration_section}
+            "calibration": _calibration_section, "switching": _switching_section}

@@ -142,7 +142,7 @@ class _Rig:
             self.advance(0.05)
             for s in self.summaries:
                 res = self.loop.on_summary(s.k, s.phasors, goal.frequency_hz, s.samples_per_cycle,
-                                           self.device.time_s, s.table_seq)
+                                           self.device.time_s, s.table_seq, s.first_cycle)
                 if res is None or res.step is None:
                     continue
                 yield res
@@ -153,15 +153,18 @@ class _Rig:
             self.summaries.clear()
 
 
-def run_latency(goal, seed: int, latency_s: float, iterations: int = 6, tables: bool = True
-                ) -> list[tuple[int, float, int]]:
+def run_latency(goal, seed: int, latency_s: float, iterations: int = 6, tables: bool = True,
+                summary_latency_s: float | None = None, stall_s: float = 0.0) -> list[tuple[int, float, int]]:
     """``goal`` as the running stack learns it, with ``latency_s`` (device time) on each path.
 
     The loop takes the goal up as it starts ramping in (as accel_feedback does); every summary
     reaches the loop and every correction reaches the generator ``latency_s`` late (the CAN bridge,
     DDS, a busy node). ``tables`` False hides the summaries' table numbers from the loop (as a
-    caller that does not pass them). Returns ``(iteration, estimated error, device table of the
-    estimate's last summary)`` per learning step.
+    caller that does not pass them, nor the cycle indices); ``summary_latency_s`` (default
+    ``latency_s``) delays the summaries alone; ``stall_s`` holds the summaries after each new
+    table's first one that long and then delivers them at once (a stalled bridge or node).
+    Returns ``(iteration, estimated error, device table of the estimate's last summary)`` per
+    learning step.
     """
     from collections import deque
 
@@ -174,12 +177,20 @@ def run_latency(goal, seed: int, latency_s: float, iterations: int = 6, tables: 
         rig.loop.set_goal(goal, rig.device.time_s, ramp_left_fraction=1.0)
         rig.summaries.clear()
         summaries, corrections = deque(), deque()
+        last_table, held_until = [None], [-1.0]
         while rig.device.time_s < 30.0 and (not steps or steps[-1][0] < iterations):
             rig.link.heartbeat()
             rig.device.advance(0.01)
             rig.link.poll()
             now = rig.device.time_s
-            summaries.extend((now + latency_s, s) for s in rig.summaries)
+            lag = latency_s if summary_latency_s is None else summary_latency_s
+            for s in rig.summaries:
+                if stall_s and s.table_seq != last_table[0]:
+                    # The first summary of a new table arrives; the next ones stall and then arrive at once.
+                    last_table[0], held_until[0] = s.table_seq, now + lag + stall_s
+                    summaries.append((now + lag, s))
+                    continue
+                summaries.append((max(now + lag, held_until[0]), s))
             rig.summaries.clear()
             while corrections and corrections[0][0] <= now:
                 step = corrections.popleft()[1]
@@ -187,7 +198,7 @@ def run_latency(goal, seed: int, latency_s: float, iterations: int = 6, tables: 
             while summaries and summaries[0][0] <= now:
                 s = summaries.popleft()[1]
                 res = rig.loop.on_summary(s.k, s.phasors, goal.frequency_hz, s.samples_per_cycle, now,
-                                          s.table_seq if tables else None)
+                                          s.table_seq if tables else None, s.first_cycle if tables else None)
                 if res is not None and res.step is not None:
                     steps.append((res.step.iteration, res.step.error_relative, s.table_seq))
                     corrections.append((now + latency_s, res.step))
@@ -248,7 +259,7 @@ def run_switching(seed: int, goals: int = 12, dwell_s: float = 1.5, status_laten
         if goal is None:
             return
         res = rig.loop.on_summary(summary.k, summary.phasors, goal.frequency_hz, summary.samples_per_cycle,
-                                  rig.device.time_s, summary.table_seq)
+                                  rig.device.time_s, summary.table_seq, summary.first_cycle)
         if res is None or res.step is None:
             return
         if current["index"] not in rows:

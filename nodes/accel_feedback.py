@@ -212,7 +212,7 @@ class AccelFeedbackNode(PpodLifecycleNode):
                 return  # no goal and no known frequency: nothing to refer the phases to
             try:
                 out = self.loop.on_summary(summary.k, summary.phasors, freq, summary.samples_per_cycle, self._now(),
-                                           table_seq=summary.table_seq)
+                                           table_seq=summary.table_seq, cycle=summary.first_cycle)
             except EstimationError as exc:
                 # A dead acquisition or too few channels: never push on it; stop and say why.
                 self.diagnostics.set("channels", diag.ERROR, str(exc), **exc.channel_status)

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ppod_ros.actuation.planning import GoalPlan, GoalPlanner
+from ppod_ros.can.protocol import CYCLE_MODULUS
 from ppod_ros.config.fields import Fields
 from ppod_ros.control.learned_plant import PlantLearner, PlantLearningSettings
 from ppod_ros.control.learning import DIVERGED, LearningController, LearningSettings
@@ -175,6 +176,9 @@ class FeedbackLoop:
         self._sent_from: int | None = None
         self._step_s = -math.inf
         self._table: int | None = None  # the device table the summaries showed last
+        self._table_cycle: int | None = None  # the device cycle it first showed in
+        self._resume_cycle: int | None = None  # the device cycle from which it has settled
+        self._ramp_s = 0.0  # the goal's ramp, while its own and its starting tables ramp in
 
     def _make_estimator(self) -> AccelEstimator:
         """The estimator: the calibration's allowance, else the learned one once ready, else the default."""
@@ -207,6 +211,8 @@ class FeedbackLoop:
         plan = self.planner.plan(motion)
         limits = self.config.limits
         self._resume_s += min(max(ramp_left_fraction, 0.0), 1.0) * plan.ramp_s
+        self._ramp_s = plan.ramp_s
+        self._resume_cycle = self._settled_cycle(motion.frequency_hz)
         # Every row of the generator's table is controlled: the goal's harmonics, 1..3 and the
         # third-order distortion products (GoalPlanner's table_size).
         kc = plan.currents_a.shape[0]
@@ -275,18 +281,25 @@ class FeedbackLoop:
         return phasors / high_pass_response(np.asarray(k) * frequency_hz, acc.ac_coupling_hz, dt)[:, None]
 
     def on_summary(self, k: np.ndarray, phasors: np.ndarray, frequency_hz: float, samples_per_cycle: int,
-                   now_s: float, table_seq: int | None = None) -> LoopOutput | None:
+                   now_s: float, table_seq: int | None = None, cycle: int | None = None) -> LoopOutput | None:
         """Feed one summary (harmonics ``k``, phasors (K, C)); returns an output when one is ready.
 
         ``table_seq`` is the device table the summary was computed on (``AccelSummary.table_seq``):
         when given, a control step's next estimate uses only summaries of a later table, from
         ``settle_s`` after it first shows (a correction the generator applies late is never
-        measured before it plays), and an estimate never mixes two tables.
+        measured before it plays), and an estimate never mixes two tables. ``cycle`` is the device
+        cycle index of the summary's first cycle (``AccelSummary.first_cycle``): with both, the
+        settling time after a table first shows is also counted in the device's own cycles, so
+        summaries that reach the loop late (a backlog on the bridge, a busy node) are never taken
+        for the settled plate.
         """
-        if table_seq is not None and not self._new_table(int(table_seq), now_s):
+        if table_seq is not None and not self._new_table(int(table_seq), now_s, cycle, frequency_hz):
             return None
         if now_s < self._resume_s:
             return None
+        if cycle is not None and self._resume_cycle is not None and \
+                (int(cycle) - self._resume_cycle) % CYCLE_MODULUS >= CYCLE_MODULUS // 2:
+            return None  # computed before the device's own settling time (summaries arriving late)
         k = np.asarray(k, dtype=int)
         if frequency_hz <= 0 or not math.isfinite(frequency_hz):
             raise ConfigError(f"frequency_hz: must be a positive frequency, got {frequency_hz}")
@@ -331,9 +344,10 @@ class FeedbackLoop:
             # The next measurement must see the new table, after its crossfade and the plate's transient.
             self._resume_s = now_s + self.settings.settle_s
             self._sent_from, self._step_s = table_seq, now_s
+            self._ramp_s = 0.0  # learning steps crossfade over the device's minimum ramp (in settle_s)
         return out
 
-    def _new_table(self, table_seq: int, now_s: float) -> bool:
+    def _new_table(self, table_seq: int, now_s: float, cycle: int | None, frequency_hz: float) -> bool:
         """False while the summaries still show the table the last step was measured on.
 
         Every change of table restarts the settling time from now (device time): a correction
@@ -352,12 +366,14 @@ class FeedbackLoop:
                 self._collect = _Collect()
             self._table = table_seq
             self._sent_from = None
+            self._table_cycle = None if cycle is None else int(cycle)
+            self._resume_cycle = self._settled_cycle(frequency_hz)
         return True
-        if table_seq == self._sent_from:
-            if now_s - self._step_s < self.settings.table_wait_s:
-                return False
-        else:
-            self._resume_s = max(self._resume_s, now_s + self.settings.settle_s)
-        self._sent_from = None
-        self._collect = _Collect()
-        return True
+
+    def _settled_cycle(self, frequency_hz: float) -> int | None:
+        """The device cycle from which the current table has settled: its first cycle plus ``settle_s``
+        (and the goal's ramp while the goal's own and starting tables ramp in), in cycles."""
+        if self._table_cycle is None or not (frequency_hz > 0 and math.isfinite(frequency_hz)):
+            return None
+        wait_s = self.settings.settle_s + self._ramp_s
+        return (self._table_cycle + math.ceil(wait_s * frequency_hz)) % CYCLE_MODULUS

@@ -9,7 +9,9 @@ while a goal is active, learning-control corrections:
    for this goal before (:class:`~ppod_ros.control.store.CorrectionStore`), else from the one the
    learned plant predicts (``G^-1 goal - feedforward``), else from zero. Measurements start after
    ``settle_s``.
-2. ``on_summary(k, phasors, samples_per_cycle, now_s)``: compensates each channel's AC coupling (a
+2. ``on_summary(k, phasors, frequency_hz, samples_per_cycle, now_s, table_seq, cycle)``: skips
+   summaries of the table a step was measured on and those before a table has settled (in the
+   device's cycles), compensates each channel's AC coupling (a
    known sensor response), collects ``summaries_per_estimate`` summaries, estimates, and, if the
    loop controls, teaches the plant learner (the applied currents and what they gave) and updates
    the correction; then waits ``settle_s`` (the plate's suspension

@@ -271,7 +271,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         path = self._raw_dir() / f"raw_{stamp}_{capture.capture_id}.npz"
         try:
             rec = recording_from_captures([capture], freq, self.config.accelerometers.layout.names,
-                                          meta={"device": self.config.name, "goal": goal,
+                                          meta={"device": self.config.name, "motion": goal or "raw",
                                                 "start_cycle": int(capture.start_cycle)})
             path.parent.mkdir(parents=True, exist_ok=True)
             write_recording(rec, path)

@@ -181,6 +181,6 @@ def test_a_raw_capture_on_request_is_written_as_a_recording(ros, sim, tmp_path):
     assert ros.wait_until(lambda: list(tmp_path.glob("raw_*.npz")), 30)
     rec = read_recording(next(tmp_path.glob("raw_*.npz")))
     layout = node.config.accelerometers.layout
-    assert rec.channels == layout.names and rec.meta["goal"] == "LineSinkX"
+    assert rec.channels == layout.names and rec.meta["motion"] == "LineSinkX"
     est = AccelEstimator(layout, harmonics=6).from_recording(rec, 0)
     assert est.phasors.shape[1] == 6 and abs(est.phasors[0, 0]) > 1.0  # the plate's p''x, read from raw samples

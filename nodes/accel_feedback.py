@@ -57,11 +57,15 @@ class AccelFeedbackNode(PpodLifecycleNode):
         Param("control", True, "send corrections (false: estimate and publish only)"),
         Param("summaries_per_estimate", 3, "device summaries averaged per estimate", min_value=1, max_value=64),
         Param("settle_s", 0.6, "wait after a goal or correction before measuring (s)", min_value=0.0),
+        Param("table_wait_s", 2.0, "after a correction, measure only the device's next table; give up waiting "
+              "after this long (s)", min_value=0.0),
         Param("gain", 1.0, "learning gain", min_value=0.01, max_value=2.0),
         Param("tolerance", 0.01, "converged when error_relative <= this", min_value=1e-5, max_value=0.5),
         Param("cache_dir", "", "where learned corrections are kept per device and goal; empty: ~/.cache/ppod"),
         Param("learn_plant", True, "learn the plant online and start each new goal from the correction it predicts"),
         Param("plant_prior_weight_a2", 0.01, "ridge weight of the nominal plant in the learned one (A^2)",
+              min_value=1e-9),
+        Param("plant_coupling_weight_a2", 0.1, "ridge weight of actuator cross-coupling in the learned plant (A^2)",
               min_value=1e-9),
         Param("plant_forgetting", 0.95, "weight kept by earlier plant samples per new one", min_value=1e-3,
               max_value=1.0),
@@ -94,12 +98,14 @@ class AccelFeedbackNode(PpodLifecycleNode):
         overrides = {k: params[f"can_{k}"] for k in ("interface", "channel") if params[f"can_{k}"]}
         config = config.with_can(**overrides) if overrides else config
         settings = OnlineSettings(summaries_per_estimate=params["summaries_per_estimate"],
-                                  settle_s=params["settle_s"], control=params["control"])
+                                  settle_s=params["settle_s"], control=params["control"],
+                                  table_wait_s=params["table_wait_s"])
         learning = LearningSettings.from_dict({"gain": params["gain"], "tolerance": params["tolerance"]})
         cache = Path(params["cache_dir"]).expanduser() if params["cache_dir"] else Path.home() / ".cache" / "ppod"
         plant_learning = PlantLearningSettings(enabled=params["learn_plant"],
                                                prior_weight_a2=params["plant_prior_weight_a2"],
-                                               forgetting=params["plant_forgetting"])
+                                               forgetting=params["plant_forgetting"],
+                                               coupling_weight_a2=params["plant_coupling_weight_a2"])
         calibration = load_calibration(cache, config.name) if params["use_calibration"] else None
         self.get_logger().info(f"accelerometer calibration: {calibration_path(cache, config.name)}"
                                if calibration is not None else "accelerometer calibration: none (nominal layout)")
@@ -205,7 +211,8 @@ class AccelFeedbackNode(PpodLifecycleNode):
             if not np.isfinite(freq):
                 return  # no goal and no known frequency: nothing to refer the phases to
             try:
-                out = self.loop.on_summary(summary.k, summary.phasors, freq, summary.samples_per_cycle, self._now())
+                out = self.loop.on_summary(summary.k, summary.phasors, freq, summary.samples_per_cycle, self._now(),
+                                           table_seq=summary.table_seq, cycle=summary.first_cycle)
             except EstimationError as exc:
                 # A dead acquisition or too few channels: never push on it; stop and say why.
                 self.diagnostics.set("channels", diag.ERROR, str(exc), **exc.channel_status)
@@ -260,6 +267,8 @@ class AccelFeedbackNode(PpodLifecycleNode):
             self._request_stop(f"learning control diverged ({step.message})")
             return
         self._send_correction(goal.name, step.k, step.correction_a, step.iteration)
+        self.get_logger().info(f"'{goal.name}' iteration {step.iteration}: error {100 * step.error_relative:.2f} % "
+                               f"measured on device table {out.table_seq}")
         level = diag.OK if step.state in ("converged", "running") else diag.WARN
         self.diagnostics.set("learning", level, f"{step.state}: error {100 * step.error_relative:.2f} %",
                              iteration=step.iteration, error_relative=step.error_relative,

@@ -11,12 +11,15 @@ Goals come on a topic (ppod/plate_motion_goal) or the SetPlateMotion service (wi
 is checked against every device limit and either sent (ramped) or rejected whole naming the limit,
 with nothing sent. Corrections (HarmonicCorrection, from accel_feedback) are clipped and applied to
 the active goal only. The emergency-stop service works in every state, also before configure.
+ppod/capture_raw (Trigger) asks the device for raw_cycles whole cycles of raw accelerometer samples
+and writes them, when they arrive, as an .npz recording under raw_dir (for ppod calibrate accel).
 Publishes the active motion and its status (transient local), the device status and diagnostics.
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from ppod_msgs.msg import DeviceStatus, HarmonicCorrection, PlateMotionStatus
@@ -34,8 +37,11 @@ from ppod_ros.actuation.generator import GeneratorState, GoalOutcome, WaveformGe
 from ppod_ros.actuation.planning import GoalPlanner
 from ppod_ros.can import DeviceLink, open_bus, open_bus_waiting, send_estop
 from ppod_ros.can.load import MeteredBus
+from ppod_ros.can.protocol import MAX_RAW_CYCLES
 from ppod_ros.device import load_device_config
 from ppod_ros.errors import ConfigError, DeviceError
+from ppod_ros.estimation import write_recording
+from ppod_ros.estimation.recording import recording_from_captures
 from ppod_ros.motion import PlateMotion
 
 RESET_ESTOP = topics.RESET_ESTOP
@@ -55,6 +61,10 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         Param("status_rate_hz", 10.0, "rate of PlateMotionStatus and DeviceStatus (Hz)", min_value=0.5,
               max_value=100.0),
         Param("shutdown_timeout_s", 3.0, "bound on the ramp-down at deactivate and shutdown (s)", min_value=0.1),
+        Param("raw_cycles", 4, "whole cycles of raw samples per ppod/capture_raw request", min_value=1,
+              max_value=MAX_RAW_CYCLES),
+        Param("raw_dir", "", "where ppod/capture_raw writes its .npz recordings; empty: "
+              "~/.cache/ppod/<device>/raw"),
     )
 
     def __init__(self, **kwargs):
@@ -75,6 +85,9 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         self.create_service(Trigger, topics.STOP, self._on_stop)
         self.create_service(Trigger, topics.ESTOP, self._on_estop)
         self.create_service(Trigger, RESET_ESTOP, self._on_reset_estop)
+        self.create_service(Trigger, topics.CAPTURE_RAW, self._on_capture_raw)
+        self._raw_pending: dict[int, tuple[float, str]] = {}  # capture id -> (frequency, goal name)
+        self._raw_next = 0
 
     # ------------------------------------------------------------------ lifecycle
     def on_configure_node(self, params):
@@ -91,6 +104,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
             self._close()
             raise
         self.gen = WaveformGenerator(self.link, GoalPlanner(self.config))
+        self.link.on_raw.append(self._on_raw)
         self.get_logger().info(f"device '{self.config.name}' on {self.config.can.interface} "
                                f"{self.config.can.channel}: protocol {version.major}.{version.minor}, "
                                f"{version.n_channels} accelerometer channels")
@@ -214,6 +228,58 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         self._publish_active(None)
         response.success, response.message = True, "ramping the plate to rest"
         return response
+
+    # ------------------------------------------------------------------ raw captures on request
+    def _on_capture_raw(self, _request, response):
+        """Ask the device for ``raw_cycles`` whole cycles of every channel's raw samples.
+
+        The capture arrives over CAN later (the device pauses its summaries while sending it); it is
+        written as an .npz recording (docs/feedback.md, "Recorded data") that ``ppod calibrate accel``
+        and the estimator read, and the path is logged.
+        """
+        if self.gen is None or self.lifecycle_state != "active":
+            response.success, response.message = False, f"not active ({self.lifecycle_state})"
+            return response
+        plan = self.gen.active_plan
+        freq = plan.frequency_hz if plan is not None else self.config.sim.idle_frequency_hz
+        capture_id = self._raw_next
+        self._raw_next = (self._raw_next + 1) % 16  # the protocol's 4-bit capture id
+        cycles = int(self.params["raw_cycles"])
+        try:
+            self.link.request_raw((1 << self.config.accelerometers.num_channels) - 1, cycles, capture_id)
+        except DeviceError as exc:
+            response.success, response.message = False, f"raw capture not requested: {exc}"
+            return response
+        self._raw_pending[capture_id] = (freq, plan.motion.name if plan is not None else "")
+        response.success = True
+        response.message = (f"raw capture {capture_id} requested: {self.config.accelerometers.num_channels} channels x "
+                            f"{cycles} cycles at {freq:g} Hz, written to {self._raw_dir()} when received "
+                            f"(summaries pause while it is sent)")
+        return response
+
+    def _raw_dir(self) -> Path:
+        if self.params["raw_dir"]:
+            return Path(self.params["raw_dir"]).expanduser()
+        return Path.home() / ".cache" / "ppod" / self.config.name / "raw"
+
+    def _on_raw(self, capture) -> None:
+        freq, goal = self._raw_pending.pop(capture.capture_id, (math.nan, ""))
+        if not math.isfinite(freq):
+            self.get_logger().warn(f"raw capture {capture.capture_id} was not requested by this node: ignored")
+            return
+        stamp = self.get_clock().now().nanoseconds
+        path = self._raw_dir() / f"raw_{stamp}_{capture.capture_id}.npz"
+        try:
+            rec = recording_from_captures([capture], freq, self.config.accelerometers.layout.names,
+                                          meta={"device": self.config.name, "motion": goal or "raw",
+                                                "start_cycle": int(capture.start_cycle)})
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_recording(rec, path)
+        except (ConfigError, OSError) as exc:
+            self.get_logger().error(f"raw capture {capture.capture_id} not written: {exc}")
+            return
+        self.get_logger().info(f"raw capture {capture.capture_id}: {capture.samples.shape[0]} samples x "
+                               f"{capture.samples.shape[1]} channels -> {path}")
 
     def _on_estop(self, _request, response):
         try:

@@ -39,6 +39,7 @@ ROSOUT = "/rosout"                               # rcl_interfaces/Log: every nod
 RESET_ESTOP = "ppod/reset_emergency_stop"        # std_srvs/Trigger: leave the latched emergency stop
 SIM_SCENARIO = "ppod/sim/scenario"               # std_msgs/String, latched: the simulated device's scenario
 CLOCK = "/clock"                                 # rosgraph_msgs/Clock: device time (simulated device)
+CAPTURE_RAW = "ppod/capture_raw"                 # std_srvs/Trigger: a raw accelerometer capture, to a file
 # Foxglove live-view channels (ppod view; not ROS topics)
 VIEW_SCENE = "/ppod/scene"                       # foxglove.SceneUpdate
 VIEW_TF = "/ppod/tf"                             # foxglove.FrameTransform

@@ -59,10 +59,18 @@ class PlantLearningSettings:
         A learned G_k that needs currents differing from the prior's by more than this fraction of
         the currents applied so far (``G0^-1 (G - G0)`` weighted by them) is not used: an actuator
         mismatch beyond it means a broken device or configuration, not one to learn.
+    coupling_weight_a2 : float
+        Ridge weight (A^2) of the off-diagonal entries of the actuator-side error
+        ``E = G0^-1 G - 1`` (``prior_weight_a2`` weighs its diagonal). A real actuator's error is
+        mostly its own gain and phase (coil constant, amplifier), little cross-coupling: with a
+        heavier weight off the diagonal one goal's samples already say how each actuator differs,
+        so the next goal, in other current directions, is predicted too (equal weights: the plain
+        ridge regression towards G0, exact only in the directions already excited).
     """
 
     enabled: bool = True
     prior_weight_a2: float = 0.01
+    coupling_weight_a2: float = 0.1
     forgetting: float = 0.95
     min_relative_amplitude: float = 0.05
     max_relative_change: float = 0.6
@@ -77,6 +85,7 @@ class PlantLearningSettings:
             min_relative_amplitude=f.number("min_relative_amplitude", cls.min_relative_amplitude, min_value=0.0,
                                             max_value=1.0),
             max_relative_change=f.number("max_relative_change", cls.max_relative_change, min_value=0.0),
+            coupling_weight_a2=f.number("coupling_weight_a2", cls.coupling_weight_a2, min_value=1e-9, unit="A^2"),
         )
         f.finish()
         return out
@@ -150,12 +159,27 @@ class PlantLearner:
             learned += 1
         return learned
 
+    @staticmethod
+    def _actuator_error(G0: np.ndarray, st: _Stats, lam_d: float, lam_o: float) -> np.ndarray:
+        """Ridge estimate of ``E`` in ``G = G0 (1 + E)``: row r minimises
+        ``sum_n w_n |V_n[r] - E[r] I_n|^2 + lam_d |E[r, r]|^2 + lam_o sum_(j != r) |E[r, j]|^2``,
+        ``V_n = G0^-1 U_n - I_n`` (what the currents did beyond the prior, in amperes), so
+        ``E[r] = S_vu[r] (S_uu + P_r)^-1`` with ``S_vu = G0^-1 S_au - S_uu``."""
+        S_vu = np.linalg.solve(G0, st.S_au) - st.S_uu
+        E = np.empty((6, 6), complex)
+        for r in range(6):
+            P = np.full(6, lam_o)
+            P[r] = lam_d
+            # Row r: e (S_uu + P) = S_vu[r]  <=>  (S_uu + P)^T e^T = S_vu[r]^T.
+            E[r] = np.linalg.solve((st.S_uu + np.diag(P)).T, S_vu[r])
+        return E
+
     def model(self, prior: PlantModel) -> PlantModel:
         """The learned plant on the prior's harmonics and frequency (the prior where nothing is known)."""
         self.last_fallback = ""
         if not self.settings.enabled:
             return prior
-        lam = self.settings.prior_weight_a2
+        lam_d, lam_o = self.settings.prior_weight_a2, self.settings.coupling_weight_a2
         G = prior.G.copy()
         changed = False
         notes = []
@@ -164,7 +188,7 @@ class PlantLearner:
             if st is None or st.samples == 0:
                 continue
             G0 = prior.G[i]
-            Gi = G0 + (st.S_au - G0 @ st.S_uu) @ np.linalg.inv(st.S_uu + lam * np.eye(6))
+            Gi = G0 @ (np.eye(6) + self._actuator_error(G0, st, lam_d, lam_o))
             # The implied actuator-side error E = G0^-1 (G - G0): how different, relative to the
             # currents applied, are the currents this plant needs from what the prior says. Measured
             # in current space it is the actuators' own mismatch (0.15-0.19 for the simulated plant);

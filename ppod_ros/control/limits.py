@@ -24,7 +24,8 @@ from ppod_ros.errors import ConfigError, LimitError
 
 @dataclass(frozen=True)
 class LimitEvent:
-    """One cut: ``limit`` ("max_current_a" or "max_step_a") of ``actuator`` (0..5)."""
+    """One cut: ``limit`` ("max_current_a" or "max_step_a") of ``actuator`` (0..5); actuator -1: a cut
+    of the whole table (the generator's envelope, ``limit_value`` the fraction of the step kept)."""
 
     limit: str
     actuator: int
@@ -32,6 +33,8 @@ class LimitEvent:
     requested: float
 
     def describe(self) -> str:
+        if self.actuator < 0:  # a limit on the whole table (the generator's envelope): value = the scale kept
+            return f"{self.limit}: step scaled by {self.limit_value:.3g}"
         return (
             f"actuator {self.actuator}: {self.limit} {self.limit_value:g} A, requested {self.requested:.4g} A"
         )

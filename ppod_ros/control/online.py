@@ -9,7 +9,9 @@ while a goal is active, learning-control corrections:
    for this goal before (:class:`~ppod_ros.control.store.CorrectionStore`), else from the one the
    learned plant predicts (``G^-1 goal - feedforward``), else from zero. Measurements start after
    ``settle_s``.
-2. ``on_summary(k, phasors, samples_per_cycle, now_s)``: compensates each channel's AC coupling (a
+2. ``on_summary(k, phasors, frequency_hz, samples_per_cycle, now_s, table_seq, cycle)``: skips
+   summaries of the table a step was measured on and those before a table has settled (in the
+   device's cycles), compensates each channel's AC coupling (a
    known sensor response), collects ``summaries_per_estimate`` summaries, estimates, and, if the
    loop controls, teaches the plant learner (the applied currents and what they gave) and updates
    the correction; then waits ``settle_s`` (the plate's suspension
@@ -27,15 +29,16 @@ from typing import Any
 
 import numpy as np
 
-from ppod_ros.actuation.planning import GoalPlanner
+from ppod_ros.actuation.planning import GoalPlan, GoalPlanner
+from ppod_ros.can.protocol import CYCLE_MODULUS
 from ppod_ros.config.fields import Fields
 from ppod_ros.control.learned_plant import PlantLearner, PlantLearningSettings
 from ppod_ros.control.learning import DIVERGED, LearningController, LearningSettings
-from ppod_ros.control.limits import DeviceLimits
+from ppod_ros.control.limits import DeviceLimits, LimitEvent, LimitFunction, LimitReport
 from ppod_ros.control.plant import PlantModel
 from ppod_ros.control.store import CorrectionStore
 from ppod_ros.device.schema import DeviceConfig
-from ppod_ros.errors import ConfigError
+from ppod_ros.errors import ConfigError, LimitError
 from ppod_ros.estimation import AccelCalibration, AccelEstimator, PlateEstimate
 from ppod_ros.estimation.channel_set import ChannelSet, ChannelSetChange, ChannelSetSettings
 from ppod_ros.estimation.misfit import MisfitHistory
@@ -64,6 +67,11 @@ class OnlineSettings:
     settle_s: float = 0.6
     control: bool = True
     estimator_harmonics: int = 6
+    #: After a correction the loop measures only the device's next table (the summaries name the
+    #: table they were computed on): summaries of the table it was sent from are not the
+    #: correction's effect, however late the generator applies it. If no new table arrives within
+    #: this time (s, device) after the step (a correction refused), the loop measures what plays.
+    table_wait_s: float = 2.0
     #: The device (docs/device.md) defines the plate's motion as the acceleration and angular
     #: acceleration of the plate frame expressed in that frame: only the centripetal and the
     #: tilted-gravity terms separate a reading from it. The estimator's "frame" and "euler" terms
@@ -81,6 +89,7 @@ class OnlineSettings:
             control=f.boolean("control", cls.control),
             estimator_harmonics=f.integer("estimator_harmonics", cls.estimator_harmonics, min_value=1,
                                           max_value=10),
+            table_wait_s=f.number("table_wait_s", cls.table_wait_s, min_value=0.0, unit="s"),
         )
         f.finish()
         return out
@@ -96,11 +105,14 @@ class LoopOutput:
     stored: bool = False
     #: The feedback's channel set changed with this estimate (learning restarted), else None.
     channel_change: ChannelSetChange | None = None
+    #: The device table the estimate's summaries were computed on (None when not known).
+    table_seq: int | None = None
 
 
 @dataclass
 class _Collect:
     k: np.ndarray | None = None
+    table_seq: int | None = None
     phasors: list[np.ndarray] = field(default_factory=list)
 
 
@@ -161,6 +173,14 @@ class FeedbackLoop:
         self.initial_source = ""
         self._resume_s = math.inf
         self._collect = _Collect()
+        # The table the last control step was measured on, while the loop waits for the next one
+        # (None: not waiting), and the device time of that step.
+        self._sent_from: int | None = None
+        self._step_s = -math.inf
+        self._table: int | None = None  # the device table the summaries showed last
+        self._table_cycle: int | None = None  # the device cycle it first showed in
+        self._resume_cycle: int | None = None  # the device cycle from which it has settled
+        self._ramp_s = 0.0  # the goal's ramp, while its own and its starting tables ramp in
 
     def _make_estimator(self) -> AccelEstimator:
         """The estimator: the calibration's allowance, else the learned one once ready, else the default."""
@@ -184,13 +204,17 @@ class FeedbackLoop:
         """
         self.goal = motion
         self._collect = _Collect()
+        self._sent_from = None
         self._resume_s = now_s + self.settings.settle_s
         self.controller = None
         self.initial_source = ""
         if motion is None or motion.is_zero() or not self.settings.control:
             return
         plan = self.planner.plan(motion)
+        limits = self.config.limits
         self._resume_s += min(max(ramp_left_fraction, 0.0), 1.0) * plan.ramp_s
+        self._ramp_s = plan.ramp_s
+        self._resume_cycle = self._settled_cycle(motion.frequency_hz)
         # Every row of the generator's table is controlled: the goal's harmonics, 1..3 and the
         # third-order distortion products (GoalPlanner's table_size).
         kc = plan.currents_a.shape[0]
@@ -204,9 +228,36 @@ class FeedbackLoop:
             initial = self._predicted_correction(motion, plant, k, ff)
             self.initial_source = "predicted" if initial is not None else ""
         if initial is not None:
-            initial = self.start_limits.apply(np.zeros_like(initial), initial, ff)[0]
-        self.controller = LearningController(motion, plant, self.limits, self.learning,
+            initial = self._as_generator(plan, self.start_limits, limits.start_correction_a)(
+                np.zeros_like(initial), initial, ff)[0]
+            if not np.any(initial):
+                initial = None
+        self.controller = LearningController(motion, plant, self._as_generator(plan, self.limits), self.learning,
                                              feedforward_a=ff, initial_correction_a=initial, harmonics=kc)
+
+    def _as_generator(self, plan: GoalPlan, own: DeviceLimits, step_cap_a: float | None = None) -> LimitFunction:
+        """The controller's limits: its own, then exactly what the generator will do with the result.
+
+        The generator holds every corrected table to the device envelope (through the nominal plant)
+        and scales a step back when it would not fit (:mod:`ppod_ros.actuation.corrections`). The
+        same function on the same plan gives the loop the correction the plate will really play, so
+        the controller continues from it and the plant learner pairs each measurement with the
+        currents that made it (pairing it with the currents asked for taught the learner a plant
+        that predicted the next goals' starting corrections 10-20 % off).
+        """
+        def limit(previous: np.ndarray, proposed: np.ndarray, feedforward: np.ndarray):
+            correction, report = own.apply(previous, proposed, feedforward)
+            try:
+                result = self.planner.correct(plan, correction, previous=previous, step_cap_a=step_cap_a)
+            except (ConfigError, LimitError) as exc:
+                event = LimitEvent(f"generator: {exc}", -1, 0.0, 1.0)
+                return previous.copy(), LimitReport(report.events + (event,))
+            if result.limited_by is not None:
+                event = LimitEvent(f"envelope {result.limited_by}", -1, result.scale, 1.0)
+                report = LimitReport(report.events + (event,))
+            return result.applied_a, report
+
+        return limit
 
     def _predicted_correction(self, motion: PlateMotion, plant: PlantModel, k: np.ndarray, ff: np.ndarray
                               ) -> np.ndarray | None:
@@ -232,16 +283,33 @@ class FeedbackLoop:
         return phasors / high_pass_response(np.asarray(k) * frequency_hz, acc.ac_coupling_hz, dt)[:, None]
 
     def on_summary(self, k: np.ndarray, phasors: np.ndarray, frequency_hz: float, samples_per_cycle: int,
-                   now_s: float) -> LoopOutput | None:
-        """Feed one summary (harmonics ``k``, phasors (K, C)); returns an output when one is ready."""
+                   now_s: float, table_seq: int | None = None, cycle: int | None = None) -> LoopOutput | None:
+        """Feed one summary (harmonics ``k``, phasors (K, C)); returns an output when one is ready.
+
+        ``table_seq`` is the device table the summary was computed on (``AccelSummary.table_seq``):
+        when given, a control step's next estimate uses only summaries of a later table, from
+        ``settle_s`` after it first shows (a correction the generator applies late is never
+        measured before it plays), and an estimate never mixes two tables. ``cycle`` is the device
+        cycle index of the summary's first cycle (``AccelSummary.first_cycle``): with both, the
+        settling time after a table first shows is also counted in the device's own cycles, so
+        summaries that reach the loop late (a backlog on the bridge, a busy node) are never taken
+        for the settled plate.
+        """
+        if table_seq is not None and not self._new_table(int(table_seq), now_s, cycle, frequency_hz):
+            return None
         if now_s < self._resume_s:
             return None
+        if cycle is not None and self._resume_cycle is not None and \
+                (int(cycle) - self._resume_cycle) % CYCLE_MODULUS >= CYCLE_MODULUS // 2:
+            return None  # computed before the device's own settling time (summaries arriving late)
         k = np.asarray(k, dtype=int)
         if frequency_hz <= 0 or not math.isfinite(frequency_hz):
             raise ConfigError(f"frequency_hz: must be a positive frequency, got {frequency_hz}")
-        if self._collect.k is not None and not np.array_equal(self._collect.k, k):
+        if (self._collect.k is not None and not np.array_equal(self._collect.k, k)) or \
+                self._collect.table_seq != table_seq:
             self._collect = _Collect()
         self._collect.k = k
+        self._collect.table_seq = table_seq
         self._collect.phasors.append(self.compensate(k, np.asarray(phasors, complex), frequency_hz,
                                                      samples_per_cycle))
         if len(self._collect.phasors) < self.settings.summaries_per_estimate:
@@ -259,7 +327,7 @@ class FeedbackLoop:
             active = list(self.channels.active)
             cols = self.estimator.layout.index(active)
             estimate = self.estimator.from_summaries(k, stack[..., cols], frequency_hz, channels=active)
-        out = LoopOutput(estimate, goal=self.goal, channel_change=change)
+        out = LoopOutput(estimate, goal=self.goal, channel_change=change, table_seq=table_seq)
         if change is not None and self.controller is not None:
             # Learning restarts from the correction applied now (the plate keeps its table): the
             # history and states were measured with another channel set.
@@ -277,4 +345,37 @@ class FeedbackLoop:
                 out.stored = True
             # The next measurement must see the new table, after its crossfade and the plate's transient.
             self._resume_s = now_s + self.settings.settle_s
+            self._sent_from, self._step_s = table_seq, now_s
+            self._ramp_s = 0.0  # learning steps crossfade over the device's minimum ramp (in settle_s)
         return out
+
+    def _new_table(self, table_seq: int, now_s: float, cycle: int | None, frequency_hz: float) -> bool:
+        """False while the summaries still show the table the last step was measured on.
+
+        Every change of table restarts the settling time from now (device time): a correction
+        reaches the plate when its table first shows, not when the step was taken; and a table the
+        loop did not cause (the next goal, sent before its status reached the loop) is never
+        measured as the effect of this goal's command. After ``table_wait_s`` without a new table
+        (the generator refused the correction) the loop measures what plays.
+        """
+        if self._sent_from is not None and table_seq == self._sent_from:
+            if now_s - self._step_s < self.settings.table_wait_s:
+                return False
+            self._sent_from = None
+        if table_seq != self._table:
+            if self._table is not None:
+                self._resume_s = max(self._resume_s, now_s + self.settings.settle_s)
+                self._collect = _Collect()
+            self._table = table_seq
+            self._sent_from = None
+            self._table_cycle = None if cycle is None else int(cycle)
+            self._resume_cycle = self._settled_cycle(frequency_hz)
+        return True
+
+    def _settled_cycle(self, frequency_hz: float) -> int | None:
+        """The device cycle from which the current table has settled: its first cycle plus ``settle_s``
+        (and the goal's ramp while the goal's own and starting tables ramp in), in cycles."""
+        if self._table_cycle is None or not (frequency_hz > 0 and math.isfinite(frequency_hz)):
+            return None
+        wait_s = self.settings.settle_s + self._ramp_s
+        return (self._table_cycle + math.ceil(wait_s * frequency_hz)) % CYCLE_MODULUS

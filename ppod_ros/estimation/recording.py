@@ -14,7 +14,7 @@ import csv
 import io
 import json
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -341,4 +341,35 @@ def write_recording(recording: AccelRecording, path: str | Path) -> Path:
     return path
 
 
-__all__ = ["READERS", "AccelRecording", "read_recording", "register_reader", "write_recording"]
+def recording_from_captures(captures: Sequence[Any], frequency_hz: float, names: Sequence[str],
+                            meta: dict[str, Any] | None = None) -> AccelRecording:
+    """Raw captures of the device (``ppod_ros.can.RawCapture``) as a recording, one segment each.
+
+    Sample n of a capture was taken ``(n % N) T / N + (n // N) T`` after the start of its first cycle
+    (``N`` samples per cycle, ``T = 1 / frequency_hz``): times from a cycle start, as the estimator
+    wants them. ``names`` are the layout's channel names (a capture names channels by index); every
+    capture must hold the same channels.
+    """
+    if not captures:
+        raise ConfigError("captures: expected at least one raw capture")
+    if not (frequency_hz > 0 and math.isfinite(frequency_hz)):
+        raise ConfigError(f"frequency_hz: expected the plate's frequency (Hz) of the captures, got {frequency_hz}")
+    chans = tuple(captures[0].channels)
+    if any(tuple(c.channels) != chans for c in captures) or not chans or max(chans) >= len(names):
+        raise ConfigError(f"captures: every capture must hold the same channels, within the {len(names)} of the "
+                          f"layout; got {[tuple(c.channels) for c in captures]}")
+    times, samples, segments = [], [], []
+    for i, cap in enumerate(captures):
+        y = np.asarray(cap.samples, dtype=float)
+        n = np.arange(y.shape[0])
+        N = int(cap.samples_per_cycle)
+        times.append(((n % N) / N + n // N) / frequency_hz)
+        samples.append(y)
+        segments.append(np.full(y.shape[0], i, dtype=int))
+    return AccelRecording(float(frequency_hz), tuple(names[c] for c in chans), time_s=np.concatenate(times),
+                          samples_mps2=np.concatenate(samples), segment=np.concatenate(segments),
+                          meta=dict(meta or {}))
+
+
+__all__ = ["READERS", "AccelRecording", "read_recording", "recording_from_captures", "register_reader",
+           "write_recording"]

@@ -155,3 +155,32 @@ def test_a_bus_off_episode_rejects_goals_and_the_node_answers_again_after_it(ros
         assert resp.accepted, resp.reason
     finally:
         node.link.bus = faulty.inner
+
+
+def test_a_raw_capture_on_request_is_written_as_a_recording(ros, sim, tmp_path):
+    from ppod_msgs.srv import SetPlateMotion
+    from rclpy.parameter import Parameter
+    from std_srvs.srv import Trigger
+
+    from ppod_nodes.common import topics
+    from ppod_nodes.waveform_generator import WaveformGeneratorNode
+    from ppod_ros.estimation import AccelEstimator, read_recording
+
+    node = ros.make(WaveformGeneratorNode, parameter_overrides=[
+        Parameter("can_interface", value="virtual"), Parameter("can_channel", value=sim.channel),
+        Parameter("raw_cycles", value=1), Parameter("raw_dir", value=str(tmp_path))])
+    assert not ros.call(Trigger, "/" + topics.CAPTURE_RAW, Trigger.Request()).success  # not active yet
+    node.trigger_configure()
+    node.trigger_activate()
+    assert ros.call(SetPlateMotion, "/" + topics.SET_MOTION, _request(LINESINKX)).accepted
+    # Once the plate plays the goal (past its ramp and the suspension's transient).
+    assert ros.wait_until(lambda: sim.device.time_s > 0.8 and sim.device.last_truth() is not None
+                          and abs(sim.device.last_truth().accel[0, 0]) > 5, 10)
+    resp = ros.call(Trigger, "/" + topics.CAPTURE_RAW, Trigger.Request())
+    assert resp.success and "30 Hz" in resp.message, resp.message
+    assert ros.wait_until(lambda: list(tmp_path.glob("raw_*.npz")), 30)
+    rec = read_recording(next(tmp_path.glob("raw_*.npz")))
+    layout = node.config.accelerometers.layout
+    assert rec.channels == layout.names and rec.meta["motion"] == "LineSinkX"
+    est = AccelEstimator(layout, harmonics=6).from_recording(rec, 0)
+    assert est.phasors.shape[1] == 6 and abs(est.phasors[0, 0]) > 1.0  # the plate's p''x, read from raw samples

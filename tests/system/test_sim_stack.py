@@ -133,10 +133,10 @@ def test_feedback_brings_the_mismatched_plate_within_one_percent_in_five_iterati
         n = len(truth)
         assert ros.wait_until(lambda: len(truth) >= n + 10, 15)
         true_errors = [_truth_error(m, goal) for m in truth[-10:]]
-    # The feedback issue's target is 5 iterations. With the corrections held to the full envelope and
-    # the lab-like sensor errors, the stack now takes 5-7 (iteration 3 often repeats iteration 2's
-    # error; measured over 8 runs on 2026-11-24, open in the closing note): 7 bounds it here.
-    assert first.iteration <= 7 and first.error_relative <= 0.01 and first.out_of_goal_relative <= 0.005, \
+    # The feedback issue's target: 5 iterations. Each estimate is of the table the last correction made
+    # (the loop waits for the device's next table number): a correction that reached the plate late
+    # was once measured as if it had played, repeating an error (5-7 iterations).
+    assert first.iteration <= 5 and first.error_relative <= 0.01 and first.out_of_goal_relative <= 0.005, \
         ([(m.iteration, round(m.error_relative, 4)) for m in measured], _device_story(tmp_path))
     assert np.median(true_errors) <= 0.01, true_errors
 

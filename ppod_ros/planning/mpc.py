@@ -394,7 +394,19 @@ class MultiTask:
         if missing and elapsed > self.settings.lost_after_s:
             return self._end(statuses, f"part {missing[0]} not seen for over {self.settings.lost_after_s:g} s")
         if all(s.reached for s in statuses):
-            return self._end(statuses, None, elapsed)
+            # Done only with the plate at rest (its ramp down moves the parts too): stop it first,
+            # and end when the parts are still within tolerance after the ramp.
+            if not self.current.is_zero():
+                self.phase = "holding"
+                self._v_current = np.zeros((len(self.goals), 3))
+                rest = PlateMotion.zero(self.current.frequency_hz, name="rest")
+                motion = self._switch(t_s, poses, rest, np.zeros((len(self.goals), 3)))
+                return MultiStep(motion, self.phase, False, None, *self._worst(statuses), self._text(statuses),
+                                 tuple(statuses))
+            if t_s - self.t_switch >= self.settings.ramp_s + self.settings.settle_s - 1e-9:
+                return self._end(statuses, None, elapsed)
+            return MultiStep(None, self.phase, False, None, *self._worst(statuses), self._text(statuses),
+                             tuple(statuses))
         if elapsed > self.timeout:
             n_ok = sum(s.reached for s in statuses)
             return self._end(statuses, f"timeout after {elapsed:.1f} s: {n_ok} of {len(statuses)} parts reached")

@@ -258,23 +258,23 @@ def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg):
 
 
 @njit(cache=True, error_model="numpy")
-def line_solve(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, tol, max_periods, stats):
+def line_solve(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, tol, max_periods, stats, seg):
     """Newton on the one-period map. Returns (status, average lambda, lambda at the cycle start,
-    periods used); stats[0] ends as the sticking time of the last period."""
+    periods used, sliding phases of the last period, written to ``seg`` as by :func:`line_period`);
+    stats[0] ends as the sticking time of the last period."""
     best = 1e300
-    seg = np.zeros((0, 6))
     for it in range(max_periods):
         stats[0] = 0.0
-        lamT, integ, dP, ok, _ = line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg)
+        lamT, integ, dP, ok, nseg = line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg)
         if not ok:
-            return STEP_LIMIT, 0.0, lam0, it + 1
+            return STEP_LIMIT, 0.0, lam0, it + 1, nseg
         r = lamT - lam0
         if abs(r) <= tol * (1.0 - min(dP, 0.95)):  # lam0 is within |r| / (1 - dP) of the cycle
-            return OK, integ / T, lam0, it + 1
+            return OK, integ / T, lam0, it + 1, nseg
         # Newton while it makes progress; plain iteration otherwise (the map contracts).
         lam0 = lam0 + r / (1.0 - dP) if abs(r) < best and dP < 0.999 else lamT
         best = min(best, abs(r))
-    return NOT_CONVERGED, 0.0, lam0, max_periods
+    return NOT_CONVERGED, 0.0, lam0, max_periods, 0
 
 
 # ------------------------------------------------------------------ nearly collinear: first order
@@ -363,18 +363,16 @@ def _perp_phase(c1, mu, ta, tb, sig, lam_a, N_a, nodes, span, t_at):
 
 
 @njit(cache=True, error_model="numpy")
-def line_perp(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, nodes, span, max_phases):
-    """First-order transverse part of a nearly-collinear limit cycle whose collinear part (along e,
-    from :func:`line_solve`) starts at lam0: returns (ok, average transverse velocity, transverse
-    velocity at t = 0). Every sliding phase starts with w_perp = 0 at its event (the bounded
-    solution, :func:`_perp_phase`); sticking holds w_perp = 0. A phase running through the cycle
-    start (t = 0 inside it) is integrated whole, from its event in the previous period. Not ok
-    (use the stepped path) without an event in the period or with more than ``max_phases``."""
-    seg = np.zeros((max_phases, 6))
-    stats = np.zeros(4)
-    _, _, _, ok, nseg = line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg)
+def line_perp(c1, mu, T, seg, nseg, nodes, span):
+    """First-order transverse part of a nearly-collinear limit cycle whose collinear part (along e)
+    :func:`line_solve` found, with the sliding phases ``seg[:nseg]`` of its converged period: returns
+    (ok, average transverse velocity, transverse velocity at t = 0). Every sliding phase starts with
+    w_perp = 0 at its event (the bounded solution, :func:`_perp_phase`); sticking holds w_perp = 0.
+    A phase running through the cycle start (t = 0 inside it) is integrated whole, from its event in
+    the previous period. Not ok (use the stepped path) without an event in the period or with more
+    phases than ``seg`` holds."""
     vp0 = _eval_perp(c1, 0.0)[4]
-    if not ok or nseg > max_phases:
+    if nseg > seg.shape[0]:
         return False, 0.0, 0.0
     if nseg == 0:
         return True, 0.0, vp0  # sticking all the time

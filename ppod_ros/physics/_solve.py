@@ -88,7 +88,7 @@ NEAR_COLLINEAR_ENERGY = 1e-2
 NEAR_PERTURB_PER_FP_RTOL = 0.5
 #: ``line_perp``: intervals per sliding phase, the half-width of its tanh map, and the most sliding
 #: phases per period it handles (more: the stepped path).
-PERTURB_NODES = 48
+PERTURB_NODES = 32
 PERTURB_SPAN = 6.5
 PERTURB_MAX_PHASES = 32
 
@@ -372,6 +372,8 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
     warm = np.zeros(dim)
     warm2 = np.zeros(dim)
     prior = np.ones(1)
+    seg = np.zeros((PERTURB_MAX_PHASES, 6))
+    noseg = np.zeros((0, 6))
     have_warm = False
     have_warm2 = False
     last_ok = -2
@@ -454,18 +456,15 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
         if not lin and near <= NEAR_PERTURB_PER_FP_RTOL * S[S_FP_RTOL]:
             # Nearly collinear: the closed form along e plus the first-order transverse slip.
             c1 = line_table(mc, px, py, ex, ey)
-            st, lam_avg, lam_start, periods = line_solve(
+            st, lam_avg, lam_start, periods, nseg = line_solve(
                 c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
-                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats)
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, seg)
             if st == OK:
                 frac = stats[0] / T
-                ok, perp_avg, perp_start = line_perp(
-                    c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, lam_start, T / nscan,
-                    S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, PERTURB_NODES, PERTURB_SPAN, PERTURB_MAX_PHASES)
+                ok, perp_avg, perp_start = line_perp(c1, P[PP_MU], T, seg, nseg, PERTURB_NODES, PERTURB_SPAN)
                 if ok:
                     lin = True
                     perturbed = True
-                    periods += 1
                     vres[0] = lam_avg * ex - perp_avg * ey
                     vres[1] = lam_avg * ey + perp_avg * ex
                     xres[0] = lam_start * ex - perp_start * ey
@@ -474,17 +473,17 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
         if not lin and near <= NEAR_COLLINEAR_ENERGY and not has_x0[i]:
             # Nearly collinear: the closed form along the principal direction is a close start.
             c1 = line_table(mc, px, py, ex, ey)
-            st0, _, lam_start, _ = line_solve(
+            st0, _, lam_start, _, _ = line_solve(
                 c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
-                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats)
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, noseg)
             if st0 == OK:
                 x0[0] = lam_start * ex
                 x0[1] = lam_start * ey
         if lin and not perturbed:
             c1 = line_table(mc, px, py, ex, ey)
-            st, lam_avg, lam_start, periods = line_solve(
+            st, lam_avg, lam_start, periods, _ = line_solve(
                 c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
-                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats)
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, noseg)
             vres[0] = lam_avg * ex
             vres[1] = lam_avg * ey
             xres[0] = lam_start * ex

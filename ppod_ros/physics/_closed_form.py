@@ -182,12 +182,18 @@ def _refine(c1, which, lo, hi, lam0, sig, mu, mus, N0):
 
 
 @njit(cache=True, error_model="numpy")
-def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg):
+def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg, mu_arrive):
     """One period from lambda(0) = lam0: returns (lambda(T), integral of lambda, d lambda(T)/d lam0,
     ok, sliding phases). stats[0] += time sticking, stats[2] += events. ok is False if the events did
     not advance (more than 10000 in the period). The sliding phases are written to ``seg`` (rows
     [t start, t end, sigma, lambda at the start, N at the start, 1 if it starts at an event]) while
-    they fit; the count returned may exceed its rows (then they are not all there)."""
+    they fit; the count returned may exceed its rows (then they are not all there).
+
+    A slip reaching zero within the period sticks where |alpha| <= mu_arrive n: ``mus`` for an
+    exactly collinear motion (the slip passes exactly through zero, where static friction holds);
+    ``mu`` for the nearly-collinear expansion (the slip swings past zero with its small transverse
+    part and never reaches it, so a part only comes to rest while kinetic friction decelerates it:
+    with mu_static > mu the collinear limit is not the limit of nearly-collinear motions)."""
     al, dal, lv, Lv, n, dn, N, M = eval_line(c1, 0.0)
     t = 0.0
     lam = lam0
@@ -246,7 +252,7 @@ def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg):
             t = te
             lam = lv
             stats[2] += 1
-            if can_stick and al * al <= mus * mus * n * n:
+            if can_stick and al * al <= mu_arrive * mu_arrive * n * n:
                 stick = True
                 dP = 0.0
             else:
@@ -258,14 +264,15 @@ def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg):
 
 
 @njit(cache=True, error_model="numpy")
-def line_solve(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, tol, max_periods, stats, seg):
+def line_solve(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, tol, max_periods, stats, seg, mu_arrive):
     """Newton on the one-period map. Returns (status, average lambda, lambda at the cycle start,
-    periods used, sliding phases of the last period, written to ``seg`` as by :func:`line_period`);
-    stats[0] ends as the sticking time of the last period."""
+    periods used, sliding phases of the last period, written to ``seg`` as by :func:`line_period`,
+    which also says what ``mu_arrive`` is); stats[0] ends as the sticking time of the last period."""
     best = 1e300
     for it in range(max_periods):
         stats[0] = 0.0
-        lamT, integ, dP, ok, nseg = line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg)
+        lamT, integ, dP, ok, nseg = line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg,
+                                                mu_arrive)
         if not ok:
             return STEP_LIMIT, 0.0, lam0, it + 1, nseg
         r = lamT - lam0

@@ -525,7 +525,7 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
             c1 = line_table(mc, px, py, ex, ey)
             st, lam_avg, lam_start, periods, nseg = line_solve(
                 c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
-                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, seg)
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, seg, P[PP_MU])
             if st == OK:
                 frac = stats[0] / T
                 ok, perp_avg, perp_start = line_perp(c1, P[PP_MU], T, seg, nseg, PERTURB_NODES, PERTURB_SPAN)
@@ -542,7 +542,8 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
             c1 = line_table(mc, px, py, ex, ey)
             st0, _, lam_start, _, _ = line_solve(
                 c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
-                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, noseg)
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, noseg,
+                P[PP_MU])
             if st0 == OK:
                 x0[0] = lam_start * ex
                 x0[1] = lam_start * ey
@@ -550,7 +551,8 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
             c1 = line_table(mc, px, py, ex, ey)
             st, lam_avg, lam_start, periods, _ = line_solve(
                 c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
-                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, noseg)
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, noseg,
+                P[PP_MUS])
             vres[0] = lam_avg * ex
             vres[1] = lam_avg * ey
             xres[0] = lam_start * ex

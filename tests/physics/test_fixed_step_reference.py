@@ -4,6 +4,7 @@ import numpy as np
 
 from ppod_bench.fixed_step_reference import reference_average
 from ppod_ros.motion import PlateMotion
+from ppod_ros.parts import PointPart
 from ppod_ros.physics import SolverSettings, solve_field
 from tests.physics.physics_suite import suite_motion
 
@@ -59,3 +60,19 @@ def test_transverse_component_follows_the_reference_across_the_threshold(point_p
         for i, (x, y) in enumerate(PTS[:3]):
             ref, _ = reference_average(m, point_part.mu, x, y, start=r.cycle_start[i])
             assert np.abs(ref - r.velocity[i]).max() < 1.5e-6, (ay, x, y, ref, r.velocity[i])
+
+
+def test_nearly_collinear_with_static_friction_above_kinetic_does_not_stick_at_a_reversal():
+    """mu_static > mu: the collinear LineSinkX sticks briefly at x = 0.05 (its slip passes exactly
+    through zero, where static friction holds), LineSinkXNear does not (its slip swings past zero
+    with the transverse part and never reaches it): the expansion follows the 2-D physics, as the
+    reference does (it took the collinear rule before: off by 2.4e-4 m/s)."""
+    part = PointPart(0.3, mu_static=0.45)
+    pts = [(0.05, 0.0), (0.09, -0.08)]
+    near = solve_field(suite_motion("LineSinkXNear"), part, pts, SolverSettings(cache=False))
+    line = solve_field(suite_motion("LineSinkX"), part, pts[:1], SolverSettings(cache=False))
+    assert line.stick_fraction[0] > 0.0 and near.stick_fraction[0] == 0.0
+    for i, (x, y) in enumerate(pts):
+        ref, _ = reference_average(suite_motion("LineSinkXNear"), 0.3, x, y, start=near.cycle_start[i],
+                                   mu_static=0.45)
+        assert np.abs(ref - near.velocity[i]).max() < 1.5e-6, (x, y, ref, near.velocity[i])

@@ -63,9 +63,10 @@ def principal_direction(mc, x, y):
 @njit(cache=True, error_model="numpy")
 def line_table(mc, x, y, ex, ey):
     """Coefficients along e at (x, y): rows [w, alpha(s,c), lambda_v(s,c), Lambda_v(s,c), a_n(s,c),
-    v_n(s,c), d_n(s,c)] (13 columns)."""
+    v_n(s,c), d_n(s,c), a_perp(s,c), v_perp(s,c)] (17 columns; perp: along (-ey, ex), used by
+    :func:`line_perp` only)."""
     K = mc.shape[0]
-    c1 = np.zeros((K, 13))
+    c1 = np.zeros((K, 17))
     for r in range(K):
         c1[r, 0] = mc[r, 0]
         for q, off in enumerate((1, 7, 13, 19, 25, 31)):
@@ -77,6 +78,8 @@ def line_table(mc, x, y, ex, ey):
             sc = q % 2
             c1[r, 1 + 2 * grp + sc] = ex * hx + ey * hy
             c1[r, 7 + 2 * grp + sc] = nn
+            if grp < 2:
+                c1[r, 13 + 2 * grp + sc] = ex * hy - ey * hx
     return c1
 
 
@@ -179,10 +182,18 @@ def _refine(c1, which, lo, hi, lam0, sig, mu, mus, N0):
 
 
 @njit(cache=True, error_model="numpy")
-def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats):
+def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg, mu_arrive):
     """One period from lambda(0) = lam0: returns (lambda(T), integral of lambda, d lambda(T)/d lam0,
-    ok). stats[0] += time sticking, stats[2] += events. ok is False if the events did not advance
-    (more than 10000 in the period)."""
+    ok, sliding phases). stats[0] += time sticking, stats[2] += events. ok is False if the events did
+    not advance (more than 10000 in the period). The sliding phases are written to ``seg`` (rows
+    [t start, t end, sigma, lambda at the start, N at the start, 1 if it starts at an event]) while
+    they fit; the count returned may exceed its rows (then they are not all there).
+
+    A slip reaching zero within the period sticks where |alpha| <= mu_arrive n: ``mus`` for an
+    exactly collinear motion (the slip passes exactly through zero, where static friction holds);
+    ``mu`` for the nearly-collinear expansion (the slip swings past zero with its small transverse
+    part and never reaches it, so a part only comes to rest while kinetic friction decelerates it:
+    with mu_static > mu the collinear limit is not the limit of nearly-collinear motions)."""
     al, dal, lv, Lv, n, dn, N, M = eval_line(c1, 0.0)
     t = 0.0
     lam = lam0
@@ -191,7 +202,10 @@ def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats):
     sig = 1.0
     F0 = lam0 - lv
     stick = False
+    nseg = 0
+    from_event = 0.0
     if abs(F0) <= zero_tol:
+        from_event = 1.0
         lam = lv
         if can_stick and al * al <= mus * mus * n * n:
             stick = True
@@ -222,6 +236,15 @@ def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats):
             te = T if tc < 0.0 else tc
             al, dal, lv, Lv, n, dn, N, M = eval_line(c1, te)
             integ += lam * (te - t) - sig * mu * (M - M0 - N0 * (te - t))
+            if nseg < seg.shape[0]:
+                seg[nseg, 0] = t
+                seg[nseg, 1] = te
+                seg[nseg, 2] = sig
+                seg[nseg, 3] = lam
+                seg[nseg, 4] = N0
+                seg[nseg, 5] = from_event
+            nseg += 1
+            from_event = 1.0
             if tc < 0.0:
                 lam = lam - sig * mu * (N - N0)
                 t = T
@@ -229,31 +252,151 @@ def line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats):
             t = te
             lam = lv
             stats[2] += 1
-            if can_stick and al * al <= mus * mus * n * n:
+            if can_stick and al * al <= mu_arrive * mu_arrive * n * n:
                 stick = True
                 dP = 0.0
             else:
                 dP *= (al - sig * mu * n) / (al + sig * mu * n)
                 sig = -1.0 if al > 0.0 else 1.0
         if t >= T:
-            return lam, integ, dP, True
-    return lam, integ, dP, t >= T
+            return lam, integ, dP, True, nseg
+    return lam, integ, dP, t >= T, nseg
 
 
 @njit(cache=True, error_model="numpy")
-def line_solve(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, tol, max_periods, stats):
+def line_solve(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, tol, max_periods, stats, seg, mu_arrive):
     """Newton on the one-period map. Returns (status, average lambda, lambda at the cycle start,
-    periods used); stats[0] ends as the sticking time of the last period."""
+    periods used, sliding phases of the last period, written to ``seg`` as by :func:`line_period`,
+    which also says what ``mu_arrive`` is); stats[0] ends as the sticking time of the last period."""
     best = 1e300
     for it in range(max_periods):
         stats[0] = 0.0
-        lamT, integ, dP, ok = line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats)
+        lamT, integ, dP, ok, nseg = line_period(c1, mu, mus, can_stick, T, lam0, dt, zero_tol, stats, seg,
+                                                mu_arrive)
         if not ok:
-            return STEP_LIMIT, 0.0, lam0, it + 1
+            return STEP_LIMIT, 0.0, lam0, it + 1, nseg
         r = lamT - lam0
         if abs(r) <= tol * (1.0 - min(dP, 0.95)):  # lam0 is within |r| / (1 - dP) of the cycle
-            return OK, integ / T, lam0, it + 1
+            return OK, integ / T, lam0, it + 1, nseg
         # Newton while it makes progress; plain iteration otherwise (the map contracts).
         lam0 = lam0 + r / (1.0 - dP) if abs(r) < best and dP < 0.999 else lamT
         best = min(best, abs(r))
-    return NOT_CONVERGED, 0.0, lam0, max_periods
+    return NOT_CONVERGED, 0.0, lam0, max_periods, 0
+
+
+# ------------------------------------------------------------------ nearly collinear: first order
+
+
+@njit(cache=True, error_model="numpy")
+def _eval_perp(c1, t):
+    """(lambda_v, n, N, a_perp, v_perp) at t."""
+    lv = 0.0
+    n = G
+    N = G * t
+    ap = 0.0
+    vp = 0.0
+    for r in range(c1.shape[0]):
+        w = c1[r, 0]
+        s = math.sin(w * t)
+        c = math.cos(w * t)
+        lv += c1[r, 3] * s + c1[r, 4] * c
+        n += c1[r, 7] * s + c1[r, 8] * c
+        N += c1[r, 9] * s + c1[r, 10] * c
+        ap += c1[r, 13] * s + c1[r, 14] * c
+        vp += c1[r, 15] * s + c1[r, 16] * c
+    return lv, n, N, ap, vp
+
+
+@njit(cache=True, error_model="numpy")
+def _perp_phase(c1, mu, ta, tb, sig, lam_a, N_a, nodes, span, t_at):
+    """First-order transverse slip over one sliding phase from an event at ta to one at tb.
+
+    w_perp' = -a_perp - mu n w_perp / s with s = |lambda - lambda_v| the collinear slip (zero at
+    both ends): its coefficient is singular there, and the only solution that stays bounded starts
+    from w_perp = 0 at ta. In xi with t = tm + hh tanh(xi), |xi| <= span, the coefficient
+    (dt/dxi) mu n / s stays bounded; exponential trapezoid steps on ``nodes`` intervals and on half
+    as many, combined by Richardson extrapolation. Returns (integral of w_perp over the phase,
+    w_perp at t_at if ta < t_at < tb, else 0)."""
+    tm = 0.5 * (ta + tb)
+    hh = 0.5 * (tb - ta)
+    d = 2.0 * span / nodes
+    w1 = 0.0
+    w2 = 0.0
+    i1 = 0.0
+    i2 = 0.0
+    w_at = 0.0
+    kp = 0.0
+    fp = 0.0
+    gp = 0.0
+    wp = 0.0
+    tp = ta
+    k2 = 0.0
+    f2 = 0.0
+    g2 = 0.0
+    for i in range(nodes + 1):
+        th = math.tanh(-span + i * d)
+        t = tm + hh * th
+        dtd = hh * (1.0 - th) * (1.0 + th)
+        lv, n, N, ap, _ = _eval_perp(c1, t)
+        s = sig * (lam_a - sig * mu * (N - N_a) - lv)
+        k = dtd * mu * n / s if s > 0.0 else 1e300
+        f = -dtd * ap
+        if i == 0:
+            # The bounded solution near the start: w_perp = -a_perp tau / (1 + mu n tau / s).
+            tau = hh * (1.0 + th)
+            w1 = -ap * tau / (1.0 + (mu * n * tau / s if s > 0.0 else 1e300))
+            w2 = w1
+        else:
+            e = math.exp(-0.5 * d * (kp + k))
+            w1 = w1 * e + 0.5 * d * (fp * e + f)
+            i1 += 0.5 * d * (wp * gp + w1 * dtd)
+            if i % 2 == 0:
+                e2 = math.exp(-d * (k2 + k))
+                wo = w2
+                w2 = w2 * e2 + d * (f2 * e2 + f)
+                i2 += d * (wo * g2 + w2 * dtd)
+            if tp <= t_at < t:
+                w_at = wp + (w1 - wp) * (t_at - tp) / (t - tp)
+        if i % 2 == 0:
+            k2 = k
+            f2 = f
+            g2 = dtd
+        kp = k
+        fp = f
+        gp = dtd
+        wp = w1
+        tp = t
+    return (4.0 * i1 - i2) / 3.0, w_at
+
+
+@njit(cache=True, error_model="numpy")
+def line_perp(c1, mu, T, seg, nseg, nodes, span):
+    """First-order transverse part of a nearly-collinear limit cycle whose collinear part (along e)
+    :func:`line_solve` found, with the sliding phases ``seg[:nseg]`` of its converged period: returns
+    (ok, average transverse velocity, transverse velocity at t = 0). Every sliding phase starts with
+    w_perp = 0 at its event (the bounded solution, :func:`_perp_phase`); sticking holds w_perp = 0.
+    A phase running through the cycle start (t = 0 inside it) is integrated whole, from its event in
+    the previous period. Not ok (use the stepped path) without an event in the period or with more
+    phases than ``seg`` holds."""
+    vp0 = _eval_perp(c1, 0.0)[4]
+    if nseg > seg.shape[0]:
+        return False, 0.0, 0.0
+    if nseg == 0:
+        return True, 0.0, vp0  # sticking all the time
+    total = 0.0
+    w0 = 0.0
+    first = 0
+    if seg[0, 5] == 0.0:
+        # The cycle starts while sliding: that phase began at the period's last event.
+        last = nseg - 1
+        if last == 0 or seg[last, 1] < T:
+            return False, 0.0, 0.0  # sliding all period long (or no event before T)
+        integ, w0 = _perp_phase(c1, mu, seg[last, 0], seg[0, 1] + T, seg[last, 2], seg[last, 3], seg[last, 4],
+                                nodes, span, T)
+        total += integ
+        first = 1
+        nseg = last
+    for j in range(first, nseg):
+        integ, _ = _perp_phase(c1, mu, seg[j, 0], seg[j, 1], seg[j, 2], seg[j, 3], seg[j, 4], nodes, span, -1.0)
+        total += integ
+    return True, total / T, w0 + vp0

@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit, prange
 
 from ppod_ros.physics._advance import advance, point_init, rigid_init, zero_tolerance
-from ppod_ros.physics._closed_form import line_solve, line_table, principal_direction
+from ppod_ros.physics._closed_form import line_perp, line_solve, line_table, principal_direction
 from ppod_ros.physics._contact import gauss_solve, point_plate, rigid_geometry, stick_forces
 from ppod_ros.physics._layout import (
     AX_SIZE,
@@ -79,6 +79,18 @@ RATE_PRIOR_MIN = 0.1
 #: Point parts whose a_h is collinear up to this fraction of its energy start the integrated
 #: fixed point from the closed form along the principal direction (the nearly-collinear case).
 NEAR_COLLINEAR_ENERGY = 1e-2
+#: Point parts whose energy fraction of a_h across the principal direction is below this times
+#: ``fixed_point_rtol`` take the first-order expansion about the closed form
+#: (``_closed_form.line_perp``) instead of the stepped path. Its error is of second order in the
+#: transverse component: about 2 x that fraction x the velocity scale (measured against the
+#: fixed-step reference on LineSinkX with a transverse a_y of 0.1 % to 3 %), so within the
+#: fixed-point tolerance below the threshold.
+NEAR_PERTURB_PER_FP_RTOL = 0.5
+#: ``line_perp``: intervals per sliding phase, the half-width of its tanh map, and the most sliding
+#: phases per period it handles (more: the stepped path).
+PERTURB_NODES = 32
+PERTURB_SPAN = 6.5
+PERTURB_MAX_PHASES = 32
 
 # ------------------------------------------------------------------ checks before integrating
 
@@ -167,12 +179,17 @@ def rigid_scales(mc, P, sx, sy, W):
 
 @njit(cache=True, error_model="numpy")
 def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, n, dim, tolv,
-                zero_tol, vlim, wlim, out_v, out_x, stats, prior):
+                zero_tol, vlim, wlim, out_v, out_x, stats, prior, CX, CF, carry):
     """Returns (status, periods, sticking fraction of the final period, step size).
 
     ``prior[0]`` is a prior estimate of the map's contraction rate (from a neighbouring
     configuration or a previous call; >= 1: none) used for the first period's convergence test,
-    and ends as the rate estimated here (a prior for the next configuration)."""
+    and ends as the rate estimated here (a prior for the next configuration).
+
+    ``CX``, ``CF`` (rows ``carry[0]``, at most ``depth``) are secant differences (dx, dP(x) - dx)
+    of the previous configuration's map, newest last: when present the first step is Anderson's
+    with them (a quasi-Newton step with the neighbour's Jacobian) instead of the plain step. They
+    end as the newest differences of this configuration's map (older ones kept while fewer)."""
     depth = int(S[S_DEPTH])
     maxp = int(S[S_MAX_PERIODS])
     max_steps = int(S[S_MAX_STEPS])
@@ -225,11 +242,26 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
                 out_v[j] = y[j] / T
                 out_x[j] = x[j]
             return OK, it + 1, stats[0] / T, h
+        if it > 0 and carry[0] >= 0.0 and depth > 0:
+            # The newest secant pair of this map, for the next configuration's first step.
+            nc = int(carry[0])
+            if nc == depth:
+                for a in range(depth - 1):
+                    CX[a] = CX[a + 1]
+                    CF[a] = CF[a + 1]
+                nc -= 1
+            for j in range(dim):
+                CX[nc, j] = x[j] - Xh[q - 1, j]
+                CF[nc, j] = f[j] - Fh[q - 1, j]
+            carry[0] = nc + 1
         if res >= 4.0 * prev:
             q = 0  # diverging: restart the acceleration (plain step below)
         prev = res
         q = _push(Xh, Fh, q, depth, x, f)
-        _anderson(Xh, Fh, q, dim, tolv, x)
+        if it == 0 and carry[0] >= 1.0 and depth > 0:
+            _secant_step(CX, CF, int(carry[0]), dim, tolv, x, f)
+        else:
+            _anderson(Xh, Fh, q, dim, tolv, x)
         # The limit cycle stays within the plate's velocities (within vlim, wlim: point parts by
         # the theorem, rigid parts in practice). Far out the map only translates (the part
         # decelerates) and extrapolating it would wander: outside the bound take the plain step.
@@ -284,6 +316,49 @@ def _push(Xh, Fh, q, depth, x, f):
     Xh[q] = x
     Fh[q] = f
     return q + 1
+
+
+@njit(cache=True, error_model="numpy")
+def _secant_step(CX, CF, m, dim, tolv, x, f):
+    """x <- x + f - (dX + dF) gamma, gamma = argmin |f - dF gamma| over m given secant differences
+    (tolerance-scaled, Tikhonov-regularised as in :func:`_anderson`); the plain step x + f when the
+    fit is singular or the step would exceed 1e4 plain steps."""
+    G = np.zeros(m * m)
+    g = np.zeros(m)
+    for a in range(m):
+        for b in range(m):
+            acc = 0.0
+            for j in range(dim):
+                acc += CF[a, j] * CF[b, j] / (tolv[j] * tolv[j])
+            G[a * m + b] = acc
+        acc = 0.0
+        for j in range(dim):
+            acc += CF[a, j] * f[j] / (tolv[j] * tolv[j])
+        g[a] = acc
+    tr = 0.0
+    for a in range(m):
+        tr += G[a * m + a]
+    for a in range(m):
+        G[a * m + a] += 1e-10 * tr + 1e-300
+    plain = 0.0
+    for j in range(dim):
+        plain = max(plain, abs(f[j]) / tolv[j])
+    if gauss_solve(G, 0, g, 0, m) == 0.0:
+        for j in range(dim):
+            x[j] += f[j]
+        return
+    step = 0.0
+    for j in range(dim):
+        corr = 0.0
+        for a in range(m):
+            corr += g[a] * (CX[a, j] + CF[a, j])
+        step = max(step, abs(f[j] - corr) / tolv[j])
+    for j in range(dim):
+        corr = 0.0
+        if step <= 1e4 * plain:
+            for a in range(m):
+                corr += g[a] * (CX[a, j] + CF[a, j])
+        x[j] += f[j] - corr
 
 
 @njit(cache=True, error_model="numpy")
@@ -360,6 +435,12 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
     warm = np.zeros(dim)
     warm2 = np.zeros(dim)
     prior = np.ones(1)
+    depth = int(S[S_DEPTH])
+    CX = np.zeros((max(depth, 1), dim))
+    CF = np.zeros((max(depth, 1), dim))
+    carry = np.zeros(1)
+    seg = np.zeros((PERTURB_MAX_PHASES, 6))
+    noseg = np.zeros((0, 6))
     have_warm = False
     have_warm2 = False
     last_ok = -2
@@ -434,34 +515,61 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
             x0[2] = math.copysign(4.0 * wscale, x0[2])
         st = OK
         near = 1.0
+        perturbed = False
         if kind == 0 and S[S_CLOSED_FORM] > 0.0:
             lin, ex, ey, near = principal_direction(mc, px, py)
         else:
             lin, ex, ey = False, 1.0, 0.0
+        if not lin and near <= NEAR_PERTURB_PER_FP_RTOL * S[S_FP_RTOL]:
+            # Nearly collinear: the closed form along e plus the first-order transverse slip.
+            c1 = line_table(mc, px, py, ex, ey)
+            st, lam_avg, lam_start, periods, nseg = line_solve(
+                c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, seg, P[PP_MU])
+            if st == OK:
+                frac = stats[0] / T
+                ok, perp_avg, perp_start = line_perp(c1, P[PP_MU], T, seg, nseg, PERTURB_NODES, PERTURB_SPAN)
+                if ok:
+                    lin = True
+                    perturbed = True
+                    vres[0] = lam_avg * ex - perp_avg * ey
+                    vres[1] = lam_avg * ey + perp_avg * ex
+                    xres[0] = lam_start * ex - perp_start * ey
+                    xres[1] = lam_start * ey + perp_start * ex
+            st = OK
         if not lin and near <= NEAR_COLLINEAR_ENERGY and not has_x0[i]:
             # Nearly collinear: the closed form along the principal direction is a close start.
             c1 = line_table(mc, px, py, ex, ey)
-            st0, _, lam_start, _ = line_solve(
+            st0, _, lam_start, _, _ = line_solve(
                 c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
-                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats)
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, noseg,
+                P[PP_MU])
             if st0 == OK:
                 x0[0] = lam_start * ex
                 x0[1] = lam_start * ey
-        if lin:
+        if lin and not perturbed:
             c1 = line_table(mc, px, py, ex, ey)
-            st, lam_avg, lam_start, periods = line_solve(
+            st, lam_avg, lam_start, periods, _ = line_solve(
                 c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
-                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats)
+                S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, noseg,
+                P[PP_MUS])
             vres[0] = lam_avg * ex
             vres[1] = lam_avg * ey
             xres[0] = lam_start * ex
             xres[1] = lam_start * ey
             frac = stats[0] / T
-        else:
+        elif not lin:
+            # Point parts started from the neighbour's limit cycle take their first step with its
+            # secant differences (a quasi-Newton step); otherwise none are used, but they are kept.
+            if not (kind == 0 and (has_x0[i] or (have_warm and last_ok == i - 1)) and S[S_WARM] > 0.0):
+                carry[0] = -1.0 if not (kind == 0 and S[S_WARM] > 0.0) else 0.0
+            vlim = (1.0 if kind == 0 else 2.0) * vscale + 1e-12
+            wlim = 2.0 * wscale + 1e-12
             st, periods, frac, h = fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew,
-                                               ybest, W, sc, n, dim, tolv, zero_tol,
-                                               (1.0 if kind == 0 else 2.0) * vscale + 1e-12,
-                                               2.0 * wscale + 1e-12, vres, xres, stats, prior)
+                                               ybest, W, sc, n, dim, tolv, zero_tol, vlim, wlim, vres, xres,
+                                               stats, prior, CX, CF, carry)
+            if st != OK:
+                carry[0] = 0.0
             if st == OK and kind == 1 and S[S_STARTS] > 1.5:
                 st, extra = _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc,
                                           tolv, zero_tol, vres, vscale, wscale, stats)
@@ -526,6 +634,8 @@ def _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, t
                   vscale, wscale, stats):
     """Rigid parts: solve again from other initial twists; disagreement is reported, not hidden."""
     nst = int(S[S_STARTS])
+    nocx = np.zeros((1, 3))
+    nocarry = -np.ones(1)
     x0 = np.zeros(3)
     v2 = np.zeros(3)
     x2 = np.zeros(3)
@@ -537,7 +647,7 @@ def _other_starts(mc, P, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, t
         x0[2] = wscale if s % 2 else -wscale
         st, periods, _, h = fixed_point(1, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, W, sc, 6,
                                         3, tolv, zero_tol, 2.0 * vscale + 1e-12, 2.0 * wscale + 1e-12, v2, x2,
-                                        stats, np.ones(1))
+                                        stats, np.ones(1), nocx, nocx, nocarry)
         total += periods
         if st != OK:
             return st, total

@@ -14,6 +14,7 @@ from enum import IntEnum, IntFlag
 
 import numpy as np
 
+from ppod_ros.device.config import CYCLE_MODULUS  # cycle indices in frames: the count mod 2^24
 from ppod_ros.errors import ProtocolError
 
 #: 2.0: TABLE_CRC protects a table's header and entries (required before a commit) and the device
@@ -146,7 +147,6 @@ MAX_RAMP_S = 0xFFFF * RAMP_LSB_S  # the u16 ramp field of TABLE_HEADER and CONTR
 HEARTBEAT_AGE_LSB_S = 2e-3  # uint8; 255 = 510 ms or more, or never
 COIL_RMS_LSB_A = 0.05  # uint8
 INT24_MAX = 2**23 - 1
-CYCLE_MODULUS = 2**24  # cycle indices in frames are the device's cycle count mod 2^24
 
 
 def can_id(fn: Fn, node: int) -> int:

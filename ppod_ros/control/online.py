@@ -30,13 +30,13 @@ from typing import Any
 import numpy as np
 
 from ppod_ros.actuation.planning import GoalPlan, GoalPlanner
-from ppod_ros.can.protocol import CYCLE_MODULUS
 from ppod_ros.config.fields import Fields
 from ppod_ros.control.learned_plant import PlantLearner, PlantLearningSettings
 from ppod_ros.control.learning import DIVERGED, LearningController, LearningSettings
 from ppod_ros.control.limits import DeviceLimits, LimitEvent, LimitFunction, LimitReport
 from ppod_ros.control.plant import PlantModel
 from ppod_ros.control.store import CorrectionStore
+from ppod_ros.device.config import CYCLE_MODULUS
 from ppod_ros.device.schema import DeviceConfig
 from ppod_ros.errors import ConfigError, LimitError
 from ppod_ros.estimation import AccelCalibration, AccelEstimator, PlateEstimate

@@ -47,6 +47,10 @@ from ppod_ros.errors import ConfigError
 from ppod_ros.estimation.layout import AccelerometerLayout
 from ppod_ros.motion import MAX_HARMONIC
 
+#: The device counts plate cycles modulo 2^24 (its frames carry the count as a u24); the protocol
+#: and the feedback's settling count in cycles share this one definition.
+CYCLE_MODULUS = 2**24
+
 
 # ---------------------------------------------------------------------------------------- parsing
 def _positive(f: Fields, key: str, unit: str, default: Any = ...) -> float:
@@ -333,6 +337,7 @@ def default_device_config() -> DeviceConfig:
 
 
 __all__ = [
+    "CYCLE_MODULUS",
     "NUM_ACTUATORS",
     "Accelerometers",
     "ActuatorParams",

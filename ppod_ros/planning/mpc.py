@@ -504,7 +504,7 @@ class MultiTask:
         costs, vels = self._costs(candidates, poses, statuses)
         costs = np.concatenate([current_cost, costs])
         pool = [self.current] + candidates
-        if any(not self.state[g.index].holding for g in self.goals if g.index not in self.unseen):
+        if any(not st.within for g, st in zip(self.goals, statuses) if g.index not in self.unseen):
             # The plate at rest holds every part but brings none closer: while a part is out of
             # tolerance it is no option, or a horizon on which every motion moves some part away
             # keeps the plate at rest for good (measured: 54 s of a 60 s benchmark scene).
@@ -588,8 +588,9 @@ class MultiTask:
             out = st.position_error_m > s.hold_release * g.position_tol_m or (
                 st.angle_error_rad is not None and abs(st.angle_error_rad) > s.hold_release * g.angle_tol_rad)
             tr.holding = st.within or (tr.holding and not out)
-            if tr.holding:
-                way[k] = p
+            if tr.holding:  # asked to stay where it is; one slipped out (not beyond the release) back in
+                if st.within:
+                    way[k] = p
                 weight[k] = s.hold_weight
             if self.focus is not None and g.index != self.focus:
                 weight[k] *= s.focus_others

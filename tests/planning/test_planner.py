@@ -52,7 +52,7 @@ def test_designed_linear_fields_reach_r2_098_within_the_device_limits(field_type
 
 
 def test_two_frequency_designs_refine_the_one_frequency_optimum_within_the_device_limits():
-    spec = FieldSpec.from_request("rotation", [0.02, 0.01, 0.2])
+    spec = FieldSpec.from_request("rotation", [0.0, 0.0, 0.3])  # one frequency fits it to R^2 0.991 only
     one = design_field(spec)
     two = design_field(spec, harmonics=2)
     assert list(two.motion.k) == [1, 2] and np.abs(two.motion.phasor_table(2)[1]).max() > 0.1

@@ -10,8 +10,10 @@
 Each frame: blobs are detected and measured in the plate frame (:mod:`~ppod_ros.vision.detection`),
 each blob is matched to a part type by area and shape and its pose fitted
 (:mod:`~ppod_ros.vision.shapes`); blobs that fit no part type are explained, not guessed: a blob
-that touches the work area's edge is ``edge``, one within about four pixels of another blob is
-``touching`` (their edges mix), one larger than any part is ``merged`` (parts touching, seen as
+that touches the work area's edge is ``edge``, one within about four pixels of another blob (their
+edges mix) is measured only when its fit is clean (within half the area and shape tolerances; parts
+at rest a few mm apart stay tracked) and is ``touching`` otherwise, one larger than any part is
+``merged`` (parts touching, seen as
 one blob), one smaller or misshapen is ``occluded``. Tracks are predicted to the frame time by a
 constant-velocity filter (:mod:`~ppod_ros.vision.kalman`) and matched to fitted blobs of their own
 label by the Hungarian method on distance, within a gate that grows with the track's uncertainty.
@@ -227,9 +229,6 @@ class PartTracker:
             if blob.at_edge:
                 unexplained.append(("edge", blob))
                 continue
-            if blob.crowded:
-                unexplained.append(("touching", blob))
-                continue
             best, best_score = None, math.inf
             for spec in self.specs:
                 if abs(spec.area_ratio(blob, cal) - 1) > s.area_tolerance:
@@ -245,8 +244,13 @@ class PartTracker:
                     )
                     if score < best_score:
                         best, best_score = _Measurement(spec, fit, blob), score
+            if best is not None and blob.crowded and (best.fit.shape_distance > 0.5 * s.shape_tolerance
+                                                      or abs(best.fit.area_ratio - 1) > 0.5 * s.area_tolerance):
+                best = None  # a neighbour took edge pixels: only a clean fit is still a measurement
             if best is not None:
                 measurements.append(best)
+            elif blob.crowded:
+                unexplained.append(("touching", blob))
             elif blob.area_m2 > (1 + s.area_tolerance) * biggest:
                 unexplained.append(("merged", blob))
             else:

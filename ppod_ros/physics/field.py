@@ -36,7 +36,29 @@ from ppod_ros.physics.settings import REASONS, SolverSettings
 
 
 @dataclass(frozen=True, eq=False)
-class FieldResult:
+class _SolvedArrays:
+    """The fields :class:`FieldResult` and :class:`FieldsResult` share (arrays made read-only)."""
+
+    configs: np.ndarray
+    velocity: np.ndarray
+    valid: np.ndarray
+    reason_code: np.ndarray
+    periods: np.ndarray
+    stick_fraction: np.ndarray
+    cycle_start: np.ndarray
+    seconds: float
+    setup_seconds: float
+    part_kind: str
+    settings: SolverSettings
+
+    def __post_init__(self) -> None:
+        for name in ("configs", "velocity", "valid", "reason_code", "periods", "stick_fraction",
+                     "cycle_start"):
+            getattr(self, name).setflags(write=False)
+
+
+@dataclass(frozen=True, eq=False)
+class FieldResult(_SolvedArrays):
     """The asymptotic field at N configurations (arrays are read-only).
 
     Attributes
@@ -63,24 +85,8 @@ class FieldResult:
         Configurations answered from the result cache.
     """
 
-    configs: np.ndarray
-    velocity: np.ndarray
-    valid: np.ndarray
-    reason_code: np.ndarray
-    periods: np.ndarray
-    stick_fraction: np.ndarray
-    cycle_start: np.ndarray
-    seconds: float
-    setup_seconds: float
-    part_kind: str
-    settings: SolverSettings
     motion_name: str = ""
     cache_hits: int = 0
-
-    def __post_init__(self) -> None:
-        for name in ("configs", "velocity", "valid", "reason_code", "periods", "stick_fraction",
-                     "cycle_start"):
-            getattr(self, name).setflags(write=False)
 
     @property
     def reason(self) -> np.ndarray:
@@ -227,7 +233,7 @@ WARM_STARTS = WarmStarts()
 
 
 @dataclass(frozen=True, eq=False)
-class FieldsResult:
+class FieldsResult(_SolvedArrays):
     """Fields of M motions at N configurations each (:func:`solve_fields`; arrays read-only).
 
     Attributes are those of :class:`FieldResult` with a leading motion axis: ``configs``,
@@ -236,25 +242,9 @@ class FieldsResult:
     gives motion m's :class:`FieldResult`.
     """
 
-    configs: np.ndarray
-    velocity: np.ndarray
-    valid: np.ndarray
-    reason_code: np.ndarray
-    periods: np.ndarray
-    stick_fraction: np.ndarray
-    cycle_start: np.ndarray
-    seconds: float
-    setup_seconds: float
-    part_kind: str
-    settings: SolverSettings
     motion_names: tuple[str, ...] = ()
     cache_hits: int = 0
     threads: int = 1
-
-    def __post_init__(self) -> None:
-        for name in ("configs", "velocity", "valid", "reason_code", "periods", "stick_fraction",
-                     "cycle_start"):
-            getattr(self, name).setflags(write=False)
 
     @property
     def reason(self) -> np.ndarray:

@@ -27,10 +27,7 @@ Stored per device as JSON: ``<cache_dir>/<device_id>/accel_calibration.json``
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from ppod_ros.errors import ConfigError
+from ppod_ros.estimation.device_store import device_file, read_json, write_json
 from ppod_ros.estimation.harmonic_fit import fit_harmonics
 from ppod_ros.estimation.layout import AccelerometerLayout
 from ppod_ros.estimation.recording import AccelRecording
@@ -435,30 +433,19 @@ def _null_space(layout: AccelerometerLayout, motions: Sequence[MotionData], w: n
 
 # ---------------------------------------------------------------------- store
 def calibration_path(cache_dir: str | Path, device_id: str) -> Path:
-    return Path(cache_dir).expanduser() / device_id / CALIBRATION_FILE
+    return device_file(cache_dir, device_id, CALIBRATION_FILE)
 
 
 def save_calibration(calibration: AccelCalibration, cache_dir: str | Path, device_id: str) -> Path:
     """Write the device's calibration atomically; returns its path."""
-    path = calibration_path(cache_dir, device_id)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".calibration-", suffix=".json")
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        json.dump(calibration.to_dict(), fh, indent=1)
-    os.replace(tmp, path)
-    return path
+    return write_json(calibration_path(cache_dir, device_id), calibration.to_dict())
 
 
 def load_calibration(cache_dir: str | Path, device_id: str) -> AccelCalibration | None:
     """The device's stored calibration, or None when it has none."""
     path = calibration_path(cache_dir, device_id)
-    if not path.exists():
-        return None
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{path}: unreadable calibration: {exc}") from exc
-    return AccelCalibration.from_dict(data, str(path))
+    data = read_json(path, "calibration")
+    return None if data is None else AccelCalibration.from_dict(data, str(path))
 
 
 __all__ = [

@@ -19,10 +19,7 @@ Stored as JSON: ``<cache_dir>/<device_id>/accel_misfit.json`` (:func:`save_misfi
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +29,7 @@ import numpy as np
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.estimation.calibration import ALLOWANCE_FACTOR, MIN_ALLOWANCE
+from ppod_ros.estimation.device_store import device_file, read_json, write_json
 
 #: File name of a device's learned misfit in its cache folder.
 MISFIT_FILE = "accel_misfit.json"
@@ -128,31 +126,20 @@ class MisfitHistory:
 
 
 def misfit_path(cache_dir: str | Path, device_id: str) -> Path:
-    return Path(cache_dir).expanduser() / device_id / MISFIT_FILE
+    return device_file(cache_dir, device_id, MISFIT_FILE)
 
 
 def save_misfit(history: MisfitHistory, cache_dir: str | Path, device_id: str) -> Path:
     """Write the device's learned misfit atomically; returns its path."""
-    path = misfit_path(cache_dir, device_id)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".misfit-", suffix=".json")
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        json.dump(history.to_dict(), fh, indent=1)
-    os.replace(tmp, path)
-    return path
+    return write_json(misfit_path(cache_dir, device_id), history.to_dict())
 
 
 def load_misfit(cache_dir: str | Path, device_id: str, settings: MisfitSettings | None = None
                 ) -> MisfitHistory | None:
     """The device's stored misfit history, or None when it has none."""
     path = misfit_path(cache_dir, device_id)
-    if not path.exists():
-        return None
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{path}: unreadable misfit history: {exc}") from exc
-    return MisfitHistory.from_dict(data, str(path), settings)
+    data = read_json(path, "misfit history")
+    return None if data is None else MisfitHistory.from_dict(data, str(path), settings)
 
 
 __all__ = ["MisfitHistory", "MisfitSettings", "load_misfit", "misfit_path", "save_misfit"]

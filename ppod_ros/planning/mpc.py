@@ -51,6 +51,7 @@ from ppod_ros.planning.design import _SCALE, DEFAULT_FREQUENCY_HZ, design_field,
 from ppod_ros.planning.envelope import PlantTolerance, fit_envelope
 from ppod_ros.planning.predict import predict_velocities
 from ppod_ros.planning.specs import CENTRE_RADIUS_M, FieldSpec
+from ppod_ros.planning.task import TaskStep
 
 
 @dataclass(frozen=True)
@@ -141,16 +142,10 @@ class PartStatus:
 
 
 @dataclass(frozen=True)
-class MultiStep:
-    """What :meth:`MultiTask.step` returns (the fields of TaskStep, plus one status per goal)."""
+class MultiStep(TaskStep):
+    """What :meth:`MultiTask.step` returns: a TaskStep (``position_error_m`` the largest over the
+    goals, ``angle_error_rad`` the largest over the oriented goals), plus one status per goal."""
 
-    motion: PlateMotion | None          # None: keep the current motion
-    phase: str
-    done: bool
-    failed_reason: str | None
-    position_error_m: float             # the largest over the goals
-    angle_error_rad: float | None       # the largest over the oriented goals
-    text: str
     parts: tuple[PartStatus, ...] = ()
     plan_ms: float = 0.0                # wall time of this step's planning (0 between replanning steps)
 

@@ -254,22 +254,10 @@ class _Demo:
                 _say(f"t = {t - self.t_start:5.1f} s  {fb.phase:<11} {fb.text}")
 
         wall0 = time.monotonic()
-        sent = client.send_goal_async(goal, feedback_callback=on_feedback)
-        handle = ros.wait_future(sent, 30, "MovePart goal")
-        if not handle.accepted:
-            raise DeviceError("the field_planner rejected the MovePart goal (see the log)")
-        _say("MovePart accepted by the field_planner")
-        done = threading.Event()
-        result_future = handle.get_result_async()
-        result_future.add_done_callback(lambda _f: done.set())
-        while not done.wait(0.5):
-            if not stack.alive():
-                raise DeviceError("a node of the stack died (see the log)")
-            if time.monotonic() - wall0 > 3 * self.args.timeout + 60:
-                handle.cancel_goal_async()
-                raise DeviceError("MovePart did not finish (wall-clock guard)")
+        res = await_goal(ros, stack, client, goal, on_feedback, "MovePart", wall0, 3 * self.args.timeout + 60,
+                         "the field_planner rejected the MovePart goal (see the log)",
+                         "MovePart accepted by the field_planner")
         wall = time.monotonic() - wall0
-        res = result_future.result().result
         t_end, truth = self.log.latest_truth()
         self._report(res, truth, t_end, wall)
         return 0 if res.success else 1
@@ -336,6 +324,26 @@ class _Demo:
             n = write_animation(gif, t, poses, parts, self.chosen, self.goal, self.collect, self.log.motion_at,
                                 cache, phase_at=phase_at)
             _say(f"animation: {gif} ({n} frames)")
+
+
+def await_goal(ros, stack, client, goal, on_feedback, what: str, wall0: float, guard_s: float,
+                     rejected: str, accepted: str):
+    """Send an action goal, wait for its result while the stack lives (wall-clock guard from
+    ``wall0``: cancel and fail after ``guard_s``), return the result."""
+    handle = ros.wait_future(client.send_goal_async(goal, feedback_callback=on_feedback), 30, f"{what} goal")
+    if not handle.accepted:
+        raise DeviceError(rejected)
+    _say(accepted)
+    done = threading.Event()
+    result_future = handle.get_result_async()
+    result_future.add_done_callback(lambda _f: done.set())
+    while not done.wait(0.5):
+        if not stack.alive():
+            raise DeviceError("a node of the stack died (see the log)")
+        if time.monotonic() - wall0 > guard_s:
+            handle.cancel_goal_async()
+            raise DeviceError(f"{what} did not finish (wall-clock guard)")
+    return result_future.result().result
 
 
 class _Tee:

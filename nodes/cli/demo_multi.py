@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import json
 import math
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
-from ppod_nodes.cli.demo import _Demo, _say
+from ppod_nodes.cli.demo import _Demo, _say, await_goal
 from ppod_ros.errors import ConfigError, DeviceError
 from ppod_ros.planning.goals import GoalEntry, load_goals_file, resolve_parts
 
@@ -162,21 +161,11 @@ class MultiDemo(_Demo):
 
         self.wall_goals = time.monotonic()
         self.t_start = self.log.latest_truth()[0]
-        handle = ros.wait_future(client.send_goal_async(goal, feedback_callback=on_feedback), 30, "MoveParts goal")
-        if not handle.accepted:
-            raise DeviceError("the field_planner rejected the MoveParts goals (see the log for the reason)")
-        _say(f"MoveParts accepted: tracks {ids}")
-        done = threading.Event()
-        result_future = handle.get_result_async()
-        result_future.add_done_callback(lambda _f: done.set())
-        while not done.wait(0.5):
-            if not stack.alive():
-                raise DeviceError("a node of the stack died (see the log)")
-            if time.monotonic() - self.wall_goals > 3 * self.args.timeout + 60:
-                handle.cancel_goal_async()
-                raise DeviceError("MoveParts did not finish (wall-clock guard)")
+        res = await_goal(ros, stack, client, goal, on_feedback, "MoveParts", self.wall_goals,
+                         3 * self.args.timeout + 60,
+                         "the field_planner rejected the MoveParts goals (see the log for the reason)",
+                         f"MoveParts accepted: tracks {ids}")
         wall = time.monotonic() - self.wall_goals
-        res = result_future.result().result
         ros.wait_until(lambda: False, 0.3)  # the last truth frames
         t, poses = self.log.trajectories()
         device_s = float(t[-1] - self.t_start)

@@ -96,10 +96,11 @@ class ActuatorPlantError:
     decay_s: float = 1.0
 
     def __post_init__(self):
-        from ppod_ros.actuation.envelope import Envelope
+        from ppod_ros.planning.envelope import _envelope
 
-        self._checker = Envelope(self.device)
+        self._checker = _envelope(self.device)  # the planner's shared instance of the one checker
         self._smax: dict[bytes, float] = {}
+        self._g0: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         self.scaled_motions = 0               # motions whose corrections the checker scaled back
 
     @classmethod
@@ -114,8 +115,13 @@ class ActuatorPlantError:
         return cls(np.diag(g * np.exp(1j * ph)) @ (np.eye(6) + C), device or default_device_config(), **kwargs)
 
     def _maps(self, motion):
-        G0 = self._checker.plant.frequency_response(motion.frequency_hz * motion.k.astype(float))  # (K, 6, 6)
-        return G0, np.linalg.inv(G0)
+        """The nominal plant G0 (K, 6, 6) at the motion's harmonics and its inverse, once per set
+        (every step of a closed loop plays a motion at the same few frequencies)."""
+        key = (float(motion.frequency_hz), tuple(int(k) for k in motion.k))
+        if key not in self._g0:
+            G0 = self._checker.plant.frequency_response(motion.frequency_hz * motion.k.astype(float))
+            self._g0[key] = (G0, np.linalg.inv(G0))
+        return self._g0[key]
 
     def uncorrected(self, motion):
         """``P X``: the motion the nominal feed-forward alone plays."""

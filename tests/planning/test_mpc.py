@@ -18,7 +18,17 @@ from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart, published_rigid_part
 from ppod_ros.planning import envelope, predict
-from ppod_ros.planning.mpc import TEMPLATES, MpcSettings, MultiTask, PartGoal, check_goals, template_motion
+from ppod_ros.planning.mpc import (
+    TEMPLATES,
+    MpcSettings,
+    MultiTask,
+    PartGoal,
+    base_design,
+    check_goals,
+    line_through,
+    moved,
+    template_motion,
+)
 from ppod_ros.planning.simulate import PlantError, run_on_dynamics
 
 
@@ -107,12 +117,22 @@ def test_template_table_dispatches_and_unknown_kind_raises():
     task = MultiTask([published_rigid_part()], [PartGoal(0, 0.01, 0.0, 0.5)])
     pose = np.array([0.03, 0.01, 1.0])
     for kind in TEMPLATES:
-        m = template_motion(kind, task, task.goals[0], pose)
-        assert isinstance(m, PlateMotion) and not m.is_zero()
+        ms = template_motion(kind, task, task.goals[0], pose)
+        assert ms and all(isinstance(m, PlateMotion) and not m.is_zero() for m in ms)
     with pytest.raises(ConfigError, match="unknown template field 'spiral'"):
         template_motion("spiral", task, task.goals[0], pose)
+    # The rotation both ways; none for a part without a goal angle, and no transport for a part at its goal.
+    # Both ways really: the mirrored design turns the bracket the other way (a sign change would be
+    # the same motion half a period later).
+    turns = template_motion("rotation", task, task.goals[0], pose)
+    v, ok = predict.predict_velocities(turns, task.parts[0], [pose])
+    assert len(turns) == 2 and ok.all() and v[0, 0, 2] * v[1, 0, 2] < 0
+    assert abs(v[0, 0, 2] + v[1, 0, 2]) < 0.2 * abs(v[0, 0, 2])
+    point = MultiTask([PointPart(0.3)], [PartGoal(0, 0.01, 0.0)])
+    assert template_motion("rotation", point, point.goals[0], pose) == []
+    assert template_motion("transport", point, point.goals[0], np.array([0.0102, 0.0, 0.0])) == []
     # The sink template is centred on the goal: the model's velocity vanishes there.
-    sink = template_motion("sink", task, task.goals[0], pose)
+    [sink] = template_motion("sink", task, task.goals[0], pose)
     v, ok = predict.predict_velocities([sink], PointPart(0.3), [[0.01, 0.0], [0.04, 0.0]])
     assert ok.all() and np.hypot(*v[0, 0]) < 0.1 * np.hypot(*v[0, 1])
 
@@ -242,7 +262,7 @@ def test_keep_clear_predicts_the_uncommanded_parts_where_the_candidate_takes_the
     # radii + 2 mm clearance), but the sink contracts their distance below 8 mm over the horizon.
     goals = [PartGoal(0, 0.0, 0.0)]
     poses = np.array([[0.03, 0.0, 0.0], [0.02, 0.0, 0.0]])
-    sink = template_motion("sink", MultiTask([washer, washer], goals), goals[0], poses[0])
+    [sink] = template_motion("sink", MultiTask([washer, washer], goals), goals[0], poses[0])
     costs = {}
     for keep in (False, True):
         task = MultiTask([washer, washer], goals, keep_clear=keep)
@@ -305,3 +325,52 @@ def test_the_plate_never_stays_at_rest_while_parts_are_far_from_their_goals():
         resting = resting + 0.1 if (playing is not None and playing.is_zero() and far) else 0.0
         longest = max(longest, resting)
     assert longest < 3.0, f"at rest for {longest:.1f} s with no part within tolerance"
+
+
+def test_moved_templates_are_the_designs_turned_and_shifted():
+    """A design turned about z and moved: the transport carries every part the way it is turned,
+    and the line sink through two goals holds parts at both and gathers others on the line."""
+    device = default_device_config()
+    part = PointPart(0.3)
+    transport = moved(base_design("transport", device), 0.0, 0.0, angle_rad=2.0)
+    cfg = np.array([[0.02, 0.01], [-0.03, 0.02], [0.0, -0.04]])
+    v, ok = predict.predict_velocities([transport], part, cfg)
+    assert ok.all()
+    speed = np.hypot(*v[0].T)
+    assert np.all(speed > 0.005)
+    assert np.allclose(v[0] / speed[:, None], [math.cos(2.0), math.sin(2.0)], atol=0.05)
+    goals = [PartGoal(0, 0.02, 0.01), PartGoal(1, -0.03, -0.02), PartGoal(2, 0.0, 0.03)]
+    task = MultiTask([part] * 3, goals)
+    line = line_through(task, goals[0], goals[1])
+    v, ok = predict.predict_velocities([line], part, [[0.02, 0.01], [-0.03, -0.02], [0.0, 0.03]])
+    assert ok.all()
+    assert np.hypot(*v[0, 0]) < 0.15 * np.hypot(*v[0, 2]) and np.hypot(*v[0, 1]) < 0.15 * np.hypot(*v[0, 2])
+    # The third part is driven towards the line (its distance to the line shrinks).
+    d = np.array([-0.05, -0.03]) / math.hypot(0.05, 0.03)
+    n = np.array([-d[1], d[0]])
+    side = float(n @ (np.array([0.0, 0.03]) - [0.02, 0.01]))
+    assert side * float(n @ v[0, 2]) < 0
+
+
+def test_the_plate_stops_at_the_frame_a_part_arrives_not_at_the_next_replanning():
+    task = MultiTask([PointPart(0.3)], [PartGoal(0, 0.0, 0.0, position_tol_m=1e-3)])
+    first = task.step(0.0, [[0.02, 0.0, 0.0]])
+    assert first.motion is not None and not first.motion.is_zero()
+    # 0.1 s later (replanning is every 0.5 s) the part is at its goal: the plate stops now.
+    arrived = task.step(0.1, [[0.0002, 0.0, 0.0]])
+    assert arrived.motion is not None and arrived.motion.is_zero() and arrived.phase == "holding"
+    assert task.current.is_zero()
+
+
+def test_focus_never_lowers_the_weight_of_a_part_held_at_its_goal():
+    goals = [PartGoal(0, 0.03, 0.0), PartGoal(1, -0.03, 0.0), PartGoal(2, 0.0, 0.03)]
+    task = MultiTask([PointPart(0.3)] * 3, goals)
+    poses = np.array([[0.0, -0.02, 0.0], [-0.03, 0.0002, 0.0], [0.02, 0.03, 0.0]])  # part 1 at its goal
+    task.t0 = 0.0
+    statuses = task._statuses(0.0, poses)
+    task.focus = 0
+    _way, weight = task._waypoints(poses, statuses)
+    s = task.settings
+    assert weight[0] == 1.0                             # the focused part
+    assert weight[1] == s.hold_weight                   # held: never lowered
+    assert weight[2] == s.focus_others                  # another unfinished part: lowered

@@ -41,6 +41,7 @@ from ppod_ros.physics._layout import (
     AX_RD,
     OK,
     PP_CANSTICK,
+    PP_CAPTURE_M,
     PP_EVOLVE,
     PP_KAPPA,
     PP_KAPPA_DEPART,
@@ -88,10 +89,13 @@ KAPPA_DEPART_PER_STEP_TOL = 1000.0
 
 
 @njit(cache=True, error_model="numpy")
-def point_speed_limits(P, step_tol):
-    """Set a point part's PP_KAPPA and PP_KAPPA_DEPART (m/s) from its velocity step tolerance (m/s)."""
+def point_speed_limits(P, step_tol, period):
+    """Set a point part's PP_KAPPA and PP_KAPPA_DEPART (m/s) from its velocity step tolerance (m/s),
+    and PP_CAPTURE_M: the position error (m) an early capture may make, one step tolerance of the
+    period's average velocity (see :func:`_point_capture`)."""
     P[PP_KAPPA] = KAPPA_PER_STEP_TOL * step_tol
     P[PP_KAPPA_DEPART] = KAPPA_DEPART_PER_STEP_TOL * step_tol
+    P[PP_CAPTURE_M] = step_tol * period
 
 
 @njit(cache=True, error_model="numpy")
@@ -330,8 +334,11 @@ def _point_capture(P, aux, y, W, capture):
     whose relative speed is below ``capture`` while kinetic friction still decelerates it
     (mu n > |a_h|) and static friction can hold it, would stick within a time of order
     capture / (mu n - |a_h|); stick now. Resolving that last approach would need steps ever
-    shorter near the singularity of w/|w| at w = 0."""
-    if P[PP_CANSTICK] <= 0.0 or math.hypot(W[W_S], W[W_S + 1]) > capture:
+    shorter near the singularity of w/|w| at w = 0 (in 2-D w turns ever faster as it shrinks).
+    Up to PP_KAPPA_DEPART too when the position this skips, at most |w|^2 / (2 (mu n - |a_h|)) as
+    |w| falls at least that fast, stays below PP_CAPTURE_M."""
+    nw = math.hypot(W[W_S], W[W_S + 1])
+    if P[PP_CANSTICK] <= 0.0 or nw > max(capture, P[PP_KAPPA_DEPART]):
         return False
     x, yy = _point_xy(P, y)
     ahx = W[W_U + 0] - W[W_U + 5] * yy
@@ -339,6 +346,8 @@ def _point_capture(P, aux, y, W, capture):
     n = G + W[W_U + 2] + W[W_U + 3] * yy - W[W_U + 4] * x
     a = math.hypot(ahx, ahy)
     if a >= P[PP_MU] * n or a > P[PP_MUS] * n:
+        return False
+    if nw > capture and nw * nw > 2.0 * (P[PP_MU] * n - a) * P[PP_CAPTURE_M]:
         return False
     y[2] -= W[W_S]
     y[3] -= W[W_S + 1]

@@ -21,7 +21,8 @@ STICK = 1
 PP_MU, PP_MUS, PP_X, PP_Y, PP_EVOLVE, PP_CANSTICK, PP_VSCALE = 0, 1, 2, 3, 4, 5, 6
 PP_KAPPA = 7      # relative speeds below this are "just leaving" or "about to stick" (m/s)
 PP_KAPPA_DEPART = 8  # a slip that has just left zero slides along -a_h up to this speed (m/s)
-PP_SIZE = 9
+PP_CAPTURE_M = 9  # a slip about to stick is captured early while the position error stays below this (m)
+PP_SIZE = 10
 
 # ---- rigid part parameters P (per configuration) ------------------------------------------------
 RP_MASS = 0

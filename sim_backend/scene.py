@@ -16,8 +16,8 @@ Scene file (YAML), strictly validated::
 
 The full dynamics (ppod_ros.physics) treats each part alone on the plate. Real parts do not pass
 through each other, and the tracker cannot separate parts closer than about 1.6 mm, so after each
-plate cycle :func:`separate` pushes apart any two parts whose outlines overlap: a simple, stated
-non-penetration model, not a contact-dynamics one.
+plate cycle :func:`separate` (:mod:`ppod_sim.separation`) pushes apart any two parts whose outlines
+overlap: a simple, stated non-penetration model, not a contact-dynamics one.
 
 - Shape: each outline is covered by a few circles along its long axis (one for a compact part,
   three for a slender bracket; :func:`circle_cover`), so a long part is not treated as the disc
@@ -39,11 +39,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from ppod_ros.config.fields import Fields, load_yaml_file
 from ppod_ros.errors import ConfigError
 from ppod_ros.parts import Footprint, Part, RigidPart, part_from_dict
+from ppod_sim.separation import separate  # re-exported: where callers have always found it
 
 
 @dataclass(frozen=True, eq=False)
@@ -209,138 +209,6 @@ def circle_cover(outline: np.ndarray, max_circles: int = 5) -> np.ndarray:
     nearest = dist.argmin(axis=1)
     radii = np.array([dist[nearest == j, j].max() if np.any(nearest == j) else 0.0 for j in range(k)]) + h
     return np.column_stack([centres, radii])
-
-
-def separate(xy: np.ndarray, v: np.ndarray, theta: np.ndarray, circles: list[np.ndarray], masses: np.ndarray,
-             active: np.ndarray, gap_m: float = 0.0, iterations: int = 4) -> np.ndarray:
-    """Push overlapping parts apart in place; returns the indices that were moved.
-
-    Parameters
-    ----------
-    xy : (N, 2) positions (m), modified in place.
-    v : (N, 2) velocities (m/s), modified in place: the approaching normal component is removed.
-    theta : (N,) orientations (rad), to place each part's circles.
-    circles : N arrays (K_i, 3) of body-frame circles (x, y, r) covering each outline.
-    masses : (N,) masses (kg): the push is shared in inverse proportion to them.
-    active : (N,) bool, parts still on the plate (others are ignored).
-    gap_m : extra clearance kept between outlines.
-    """
-    xy = np.asarray(xy)
-    act = np.asarray(active, dtype=bool)
-    if int(act.sum()) < 2:
-        return np.array([], dtype=int)
-    counts = np.array([len(cc) for cc in circles], dtype=np.int64)
-    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    flat = np.concatenate([np.asarray(cc, dtype=float).reshape(-1, 3) for cc in circles])
-    inv_mass = 1.0 / np.maximum(np.asarray(masses, dtype=float), 1e-9)
-    moved = np.zeros(len(circles), dtype=np.bool_)
-    _separate_kernel(xy, v, np.asarray(theta, dtype=float), flat, offsets, inv_mass, act, float(gap_m),
-                     int(iterations), moved)
-    return np.flatnonzero(moved)
-
-
-@njit(cache=True)
-def _separate_kernel(xy, v, theta, flat, offsets, inv_mass, active, gap, iterations, moved):
-    """Compiled body of :func:`separate`: broad phase on bounding circles through a spatial hash
-    (cells of the largest possible contact distance; each part meets only the parts of its own and
-    the 8 neighbouring cells: O(N log N), not O(N^2)), then for each close pair the deepest overlap
-    of their circle covers, pushed apart along its normal."""
-    n = xy.shape[0]
-    reach = np.zeros(n)
-    for i in range(n):
-        for k in range(offsets[i], offsets[i + 1]):
-            reach[i] = max(reach[i], math.hypot(flat[k, 0], flat[k, 1]) + flat[k, 2])
-    rmax = 0.0
-    for i in range(n):
-        if active[i]:
-            rmax = max(rmax, reach[i])
-    cell = max(2.0 * rmax + gap, 1e-9)
-    world = np.zeros((flat.shape[0], 2))
-    keys = np.zeros(n, np.int64)
-    cx = np.zeros(n, np.int64)
-    cy = np.zeros(n, np.int64)
-    for _ in range(iterations):
-        for i in range(n):
-            c, s = math.cos(theta[i]), math.sin(theta[i])
-            for k in range(offsets[i], offsets[i + 1]):
-                world[k, 0] = xy[i, 0] + c * flat[k, 0] - s * flat[k, 1]
-                world[k, 1] = xy[i, 1] + s * flat[k, 0] + c * flat[k, 1]
-        # Hash the active parts by cell (inactive ones get a key no cell has).
-        for i in range(n):
-            cx[i] = int(min(max(math.floor(xy[i, 0] / cell), -2.0**30), 2.0**30)) if active[i] else 0
-            cy[i] = int(min(max(math.floor(xy[i, 1] / cell), -2.0**30), 2.0**30)) if active[i] else 0
-            keys[i] = _cell_key(cx[i], cy[i]) if active[i] else _HASH_NONE
-        order = np.argsort(keys, kind="mergesort")
-        sorted_keys = keys[order]
-        any_overlap = False
-        for a in range(n):
-            if not active[a]:
-                continue
-            for ddx in range(-1, 2):
-                for ddy in range(-1, 2):
-                    key = _cell_key(cx[a] + ddx, cy[a] + ddy)
-                    lo = np.searchsorted(sorted_keys, key, side="left")
-                    hi = np.searchsorted(sorted_keys, key, side="right")
-                    for q in range(lo, hi):
-                        b = order[q]
-                        if b <= a:
-                            continue
-                        if _push_pair(a, b, xy, v, flat, offsets, inv_mass, reach, world, gap):
-                            any_overlap = True
-                            moved[a] = True
-                            moved[b] = True
-        if not any_overlap:
-            break
-
-
-#: Spatial-hash key of a cell (cells span +-2^31 along each axis) and the key of no cell.
-_HASH_NONE = np.int64(2**62)
-
-
-@njit(cache=True, inline="always")
-def _cell_key(ix, iy):
-    return (ix + 2**31) * 2**32 + (iy + 2**31)
-
-
-@njit(cache=True)
-def _push_pair(a, b, xy, v, flat, offsets, inv_mass, reach, world, gap):
-    """Push parts a and b apart along their deepest circle overlap; True if they overlapped."""
-    if math.hypot(xy[b, 0] - xy[a, 0], xy[b, 1] - xy[a, 1]) >= reach[a] + reach[b] + gap:
-        return False
-    best, bx, by, bd = 0.0, 0.0, 0.0, 0.0
-    for ka in range(offsets[a], offsets[a + 1]):
-        for kb in range(offsets[b], offsets[b + 1]):
-            dx = world[kb, 0] - world[ka, 0]
-            dy = world[kb, 1] - world[ka, 1]
-            dist = math.hypot(dx, dy)
-            depth = flat[ka, 2] + flat[kb, 2] + gap - dist
-            if depth > best:
-                best, bx, by, bd = depth, dx, dy, dist
-    if best <= 0.0:
-        return False
-    if bd > 1e-12:
-        nx, ny = bx / bd, by / bd
-    else:
-        nx, ny = 1.0, 0.0
-    wa = inv_mass[a] / (inv_mass[a] + inv_mass[b])
-    pa, pb = wa * best, (1.0 - wa) * best
-    xy[a, 0] -= pa * nx
-    xy[a, 1] -= pa * ny
-    xy[b, 0] += pb * nx
-    xy[b, 1] += pb * ny
-    for k in range(offsets[a], offsets[a + 1]):
-        world[k, 0] -= pa * nx
-        world[k, 1] -= pa * ny
-    for k in range(offsets[b], offsets[b + 1]):
-        world[k, 0] += pb * nx
-        world[k, 1] += pb * ny
-    rel = (v[b, 0] - v[a, 0]) * nx + (v[b, 1] - v[a, 1]) * ny
-    if rel < 0.0:  # approaching: remove the normal component, shared like the push
-        v[a, 0] += wa * rel * nx
-        v[a, 1] += wa * rel * ny
-        v[b, 0] -= (1.0 - wa) * rel * nx
-        v[b, 1] -= (1.0 - wa) * rel * ny
-    return True
 
 
 __all__ = ["DENSITY_KG_M3", "Scene", "ScenePart", "circle_cover", "load_scene", "scene_from_dict", "separate"]

@@ -33,7 +33,8 @@ from ppod_ros.physics.settings import REASONS
 from ppod_ros.vision.camera import CameraConfig
 from ppod_sim.camera import CameraRenderer, RenderedFrame, RenderPart
 from ppod_sim.process import SimProcess
-from ppod_sim.scene import Scene, separate
+from ppod_sim.scene import Scene
+from ppod_sim.separation import pack_circles, separate
 from ppod_sim.truth import CycleTruth
 
 log = logging.getLogger(__name__)
@@ -81,7 +82,7 @@ class SimWorld:
         solver = solver if solver is not None else SolverSettings(threads=1)
         self.dynamics = PartDynamics([p.part for p in scene.parts], scene.poses, settings=solver,
                                      time_s=self.device.time_s)
-        self.circles = [p.circles for p in scene.parts]
+        self.circles = pack_circles([p.circles for p in scene.parts])  # packed once, not per cycle
         self.masses = scene.masses_kg
         self.on_plate = np.ones(len(scene.parts), bool)
         self.half_size = plate_half_size_m

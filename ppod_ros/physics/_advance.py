@@ -34,14 +34,17 @@ from ppod_ros.physics._contact import (
 )
 from ppod_ros.physics._layout import (
     AX_BAND,
+    AX_DEPART,
     AX_DX,
     AX_DY,
     AX_MODE,
     AX_RD,
     OK,
     PP_CANSTICK,
+    PP_CAPTURE_M,
     PP_EVOLVE,
     PP_KAPPA,
+    PP_KAPPA_DEPART,
     PP_MU,
     PP_MUS,
     PP_X,
@@ -73,6 +76,27 @@ from ppod_ros.physics._layout import (
 from ppod_ros.physics._rk import rk_step
 from ppod_ros.physics.plate import G, plate_eval
 
+#: Relative speeds below this many velocity step tolerances are "just leaving zero" or "about to
+#: stick" (``PP_KAPPA``): following w / |w| there would take ever shorter steps for a change in
+#: velocity below it.
+KAPPA_PER_STEP_TOL = 100.0
+#: After a departure from w = 0 (a break-away, a pass through zero), the slip slides along -a_h up
+#: to this many step tolerances (``PP_KAPPA_DEPART``). Its direction then lags -a_h by an angle of
+#: order |w| |d(a_h/|a_h|)/dt| / (mu n): small while |w| is, yet w / |w| makes that phase stiff
+#: (rate mu n / |w|), so it took most of the steps of a period with long sticking (Stick2D: 70 of
+#: 167). Measured against the fixed-step reference (docs/solver.md).
+KAPPA_DEPART_PER_STEP_TOL = 1000.0
+
+
+@njit(cache=True, error_model="numpy")
+def point_speed_limits(P, step_tol, period):
+    """Set a point part's PP_KAPPA and PP_KAPPA_DEPART (m/s) from its velocity step tolerance (m/s),
+    and PP_CAPTURE_M: the position error (m) an early capture may make, one step tolerance of the
+    period's average velocity (see :func:`_point_capture`)."""
+    P[PP_KAPPA] = KAPPA_PER_STEP_TOL * step_tol
+    P[PP_KAPPA_DEPART] = KAPPA_DEPART_PER_STEP_TOL * step_tol
+    P[PP_CAPTURE_M] = step_tol * period
+
 
 @njit(cache=True, error_model="numpy")
 def zero_tolerance(S, vscale):
@@ -100,6 +124,7 @@ def point_at_zero(P, aux, ahx, ahy, n):
         aux[AX_MODE] = STICK
         return
     aux[AX_MODE] = SLIDE
+    aux[AX_DEPART] = 1.0
     if a > 0.0:
         aux[AX_DX] = -ahx / a
         aux[AX_DY] = -ahy / a
@@ -119,6 +144,7 @@ def point_init(mc, P, aux, t, y, W, zero_tol):
         point_at_zero(P, aux, ahx, ahy, n)
     else:
         aux[AX_MODE] = SLIDE
+        aux[AX_DEPART] = 0.0
         aux[AX_DX] = wx / nw
         aux[AX_DY] = wy / nw
 
@@ -281,6 +307,7 @@ def on_event(kind, mc, P, aux, t, y, W, zero_tol, force_zero, capture):
     ahx, ahy, n, vhx, vhy = point_plate(mc, P, t, x, yy, W)
     if aux[AX_MODE] == STICK:
         aux[AX_MODE] = SLIDE
+        aux[AX_DEPART] = 1.0
         y[2] = vhx  # leave exactly from the plate's velocity (no drift of the sticking phase)
         y[3] = vhy
         a = math.hypot(ahx, ahy)
@@ -296,6 +323,7 @@ def on_event(kind, mc, P, aux, t, y, W, zero_tol, force_zero, capture):
         y[3] = vhy
         point_at_zero(P, aux, ahx, ahy, n)
     else:
+        aux[AX_DEPART] = 0.0  # w only swung round: no departure from zero
         aux[AX_DX] = wx / nw
         aux[AX_DY] = wy / nw
 
@@ -306,8 +334,11 @@ def _point_capture(P, aux, y, W, capture):
     whose relative speed is below ``capture`` while kinetic friction still decelerates it
     (mu n > |a_h|) and static friction can hold it, would stick within a time of order
     capture / (mu n - |a_h|); stick now. Resolving that last approach would need steps ever
-    shorter near the singularity of w/|w| at w = 0."""
-    if P[PP_CANSTICK] <= 0.0 or math.hypot(W[W_S], W[W_S + 1]) > capture:
+    shorter near the singularity of w/|w| at w = 0 (in 2-D w turns ever faster as it shrinks).
+    Up to PP_KAPPA_DEPART too when the position this skips, at most |w|^2 / (2 (mu n - |a_h|)) as
+    |w| falls at least that fast, stays below PP_CAPTURE_M."""
+    nw = math.hypot(W[W_S], W[W_S + 1])
+    if P[PP_CANSTICK] <= 0.0 or nw > max(capture, P[PP_KAPPA_DEPART]):
         return False
     x, yy = _point_xy(P, y)
     ahx = W[W_U + 0] - W[W_U + 5] * yy
@@ -315,6 +346,8 @@ def _point_capture(P, aux, y, W, capture):
     n = G + W[W_U + 2] + W[W_U + 3] * yy - W[W_U + 4] * x
     a = math.hypot(ahx, ahy)
     if a >= P[PP_MU] * n or a > P[PP_MUS] * n:
+        return False
+    if nw > capture and nw * nw > 2.0 * (P[PP_MU] * n - a) * P[PP_CAPTURE_M]:
         return False
     y[2] -= W[W_S]
     y[3] -= W[W_S + 1]
@@ -328,6 +361,8 @@ def _directions_from_end(kind, P, aux, W, zero_tol):
     (left in W by event_value), so the next step's continuation and swing test start from there."""
     if kind == 0:
         nw = math.hypot(W[W_S], W[W_S + 1])
+        if nw > P[PP_KAPPA_DEPART]:
+            aux[AX_DEPART] = 0.0
         if nw > zero_tol:
             aux[AX_DX] = W[W_S] / nw
             aux[AX_DY] = W[W_S + 1] / nw

@@ -27,6 +27,7 @@ from numba import njit
 
 from ppod_ros.physics._layout import (
     AX_BAND,
+    AX_DEPART,
     AX_DX,
     AX_DY,
     AX_MODE,
@@ -36,6 +37,7 @@ from ppod_ros.physics._layout import (
     OK,
     PP_EVOLVE,
     PP_KAPPA,
+    PP_KAPPA_DEPART,
     PP_MU,
     PP_X,
     PP_Y,
@@ -93,10 +95,11 @@ def point_rhs(mc, P, aux, t, y, K, s, W):
         ahy = W[W_U + 1] + W[W_U + 5] * x
         a = math.sqrt(ahx * ahx + ahy * ahy)
         f = P[PP_MU] * n
-        if nw <= P[PP_KAPPA] and a >= f and a > 0.0:
+        if (nw <= P[PP_KAPPA] or (aux[AX_DEPART] > 0.0 and nw <= P[PP_KAPPA_DEPART])) and a >= f and a > 0.0:
             # Just leaving w = 0 (a break-away, or a reversal): the part slides away along -a_h.
             # Following w/|w| at speeds this small would take ever shorter steps (the direction
-            # is singular at 0) for a change in velocity below kappa.
+            # is singular at 0) for a change in velocity below kappa; after a departure from zero
+            # (AX_DEPART) up to the larger PP_KAPPA_DEPART (_advance.KAPPA_DEPART_PER_STEP_TOL).
             K[s, 2] = -f * (-ahx / a)
             K[s, 3] = -f * (-ahy / a)
             return OK if n > 0.0 else CONTACT_LOST

@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ppod_ros.physics._advance import advance, point_init, rigid_init, zero_tolerance
+from ppod_ros.physics._advance import advance, point_init, point_speed_limits, rigid_init, zero_tolerance
 from ppod_ros.physics._contact import rigid_geometry
 from ppod_ros.physics._layout import (
     AX_READY,
@@ -21,7 +21,6 @@ from ppod_ros.physics._layout import (
     OK,
     PP_CANSTICK,
     PP_EVOLVE,
-    PP_KAPPA,
     PP_VSCALE,
     PP_X,
     RP_CANSTICK,
@@ -65,7 +64,7 @@ def advance_part(i, kind, mc, Pall, Y, AUX, H, t0, t1, T, kmax, A, B, C, E, E3, 
         P[PP_CANSTICK] = 1.0
         sc[2] = S[S_RTOL] * vscale + S[S_ATOL_V]
         sc[3] = sc[2]
-        P[PP_KAPPA] = 100.0 * sc[2]
+        point_speed_limits(P, sc[2], T)
     else:
         rigid_geometry(P, y[2], W)
         vscale, wscale = rigid_scales(mc, P, y[0], y[1], W)

@@ -20,7 +20,9 @@ STICK = 1
 # ---- point part parameters P (per configuration) ------------------------------------------------
 PP_MU, PP_MUS, PP_X, PP_Y, PP_EVOLVE, PP_CANSTICK, PP_VSCALE = 0, 1, 2, 3, 4, 5, 6
 PP_KAPPA = 7      # relative speeds below this are "just leaving" or "about to stick" (m/s)
-PP_SIZE = 8
+PP_KAPPA_DEPART = 8  # a slip that has just left zero slides along -a_h up to this speed (m/s)
+PP_CAPTURE_M = 9  # a slip about to stick is captured early while the position error stays below this (m)
+PP_SIZE = 10
 
 # ---- rigid part parameters P (per configuration) ------------------------------------------------
 RP_MASS = 0
@@ -43,6 +45,7 @@ AX_MODE, AX_DX, AX_DY = 0, 1, 2
 AX_READY = 3      # full dynamics: the mode has been derived for the current chunk
 AX_BAND = 4       # rigid: 1 while contact i's speed is inside the regularisation band (3 values)
 AX_RD = 7         # rigid: sliding direction of contact i at the last event (x, y per contact: 6 values)
+AX_DEPART = 13    # point: 1 from a departure from w = 0 until |w| exceeds PP_KAPPA_DEPART
 AX_SIZE = 16
 
 # ---- work array W offsets -----------------------------------------------------------------------

@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ppod_ros.physics._advance import advance, point_init, rigid_init, zero_tolerance
+from ppod_ros.physics._advance import advance, point_init, point_speed_limits, rigid_init, zero_tolerance
 from ppod_ros.physics._closed_form import line_perp, line_solve, line_table, principal_direction
 from ppod_ros.physics._contact import gauss_solve, point_plate, rigid_geometry, stick_forces
 from ppod_ros.physics._layout import (
@@ -31,7 +31,6 @@ from ppod_ros.physics._layout import (
     NOT_CONVERGED,
     OK,
     PP_CANSTICK,
-    PP_KAPPA,
     PP_MU,
     PP_MUS,
     PP_VSCALE,
@@ -487,7 +486,7 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
         if kind == 1:
             P[RP_ZTOL] = max(zero_tol, 100.0 * sc[3])
         else:
-            P[PP_KAPPA] = 100.0 * sc[2]
+            point_speed_limits(P, sc[2], T)
         # Starting guess: the caller's, else the neighbour's limit cycle (extrapolated linearly
         # from the two before when the configurations are evenly spaced, as along a grid row),
         # else rest.

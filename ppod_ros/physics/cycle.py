@@ -14,7 +14,7 @@ from ppod_ros.errors import ConfigError, SolverError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import _layout as lay
-from ppod_ros.physics._advance import advance, point_init, rigid_init, zero_tolerance
+from ppod_ros.physics._advance import advance, point_init, point_speed_limits, rigid_init, zero_tolerance
 from ppod_ros.physics._contact import rigid_geometry
 from ppod_ros.physics._params import check_configs, point_rows, rigid_rows
 from ppod_ros.physics._rk import INTEGRATORS
@@ -71,7 +71,7 @@ def limit_cycle(motion: PlateMotion, part: PointPart | RigidPart, config: Any, n
         vscale = point_velocity_scale(mc, cfg[0, 0], cfg[0, 1])
         P[lay.PP_VSCALE] = vscale
         sc[2:] = rtol * vscale + settings.atol_mps
-        P[lay.PP_KAPPA] = 100.0 * sc[2]
+        point_speed_limits(P, sc[2], T)
     else:
         P = rigid_rows(part, cfg, settings.friction_eps_mps)[0]
         rigid_geometry(P, cfg[0, 2], W)

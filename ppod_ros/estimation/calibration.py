@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from ppod_ros.errors import ConfigError
+from ppod_ros.estimation import unobservable
 from ppod_ros.estimation.device_store import device_file, read_json, write_json
 from ppod_ros.estimation.harmonic_fit import fit_harmonics
 from ppod_ros.estimation.layout import AccelerometerLayout
@@ -46,15 +47,17 @@ from ppod_ros.motion import GRAVITY_MPS2
 #: Largest condition number of a channel's excitation (its 3 x 3 sensitivity normal matrix, square
 #: root) for its gain and axis to be fitted: beyond it one direction is seen 30x less than another.
 MAX_CHANNEL_CONDITION = 30.0
-#: Alternating least-squares passes, and the relative change of the sensitivities that ends them.
-MAX_PASSES = 200
-PASS_TOLERANCE = 1e-10
+#: Gauss-Newton passes, and the relative change of the sensitivities that ends them.
+MAX_PASSES = 50
+PASS_TOLERANCE = 1e-9
+#: Halvings of a Gauss-Newton step before the pass gives up improving the misfit.
+MAX_HALVINGS = 30
 #: A channel's misfit allowance in the estimator: this multiple of its cross-validated misfit ...
 ALLOWANCE_FACTOR = 3.0
 #: ... but never below this fraction of its reading (noise, motions unlike the calibration's).
 MIN_ALLOWANCE = 0.15
-#: Singular values below this fraction of the largest (Jacobian, scaled columns) count as unobserved.
-NULL_TOLERANCE = 1e-9
+#: Amplitudes of the six single-direction motions of :func:`equivalent_calibration` (m/s^2, rad/s^2).
+EQUIVALENT_MOTION_AMPLITUDES = (5.0, 5.0, 5.0, 50.0, 50.0, 50.0)
 #: File name of a device's calibration in its cache folder.
 CALIBRATION_FILE = "accel_calibration.json"
 
@@ -251,45 +254,131 @@ def _describe_direction(d: np.ndarray) -> str:
     return f"[{d[0]:+.2f}, {d[1]:+.2f}, {d[2]:+.2f}]: record a motion with {hint}"
 
 
+def equivalent_calibration(layout: AccelerometerLayout, sensitivities: np.ndarray, frequency_hz: float = 30.0,
+                           gravity_mps2: float = GRAVITY_MPS2) -> AccelCalibration:
+    """What the calibration makes of an array whose true sensitivities (gain x axis, (C, 3)) are known.
+
+    Calibrates exact, noise-free first-order readings of six single-direction motions made with
+    ``sensitivities``: the result reads every rigid motion exactly as they do and differs from them
+    only along the unobserved directions, fixed by the calibration's convention. This is the truth a
+    calibration of a device with known sensor errors (the simulator) is to be compared with.
+    """
+    w = np.asarray(sensitivities, float)
+    if w.shape != (layout.num_channels, 3) or not np.all(np.isfinite(w)):
+        raise ConfigError(f"sensitivities: expected finite ({layout.num_channels}, 3), got {w.shape}")
+    motions = []
+    for j, amp in enumerate(EQUIVALENT_MOTION_AMPLITUDES):
+        U = np.zeros((1, 6), complex)
+        U[0, j] = amp
+        m = MotionData(f"unit-{j}", frequency_hz, np.array([1]), np.zeros((1, layout.num_channels), complex))
+        Y = np.einsum("kcj,cj->kc", _rows(U, _levers(layout, [m], gravity_mps2)[0]), w)
+        motions.append(MotionData(m.name, frequency_hz, m.k, Y))
+    return calibrate(layout, motions, second_order_terms=(), gravity_mps2=gravity_mps2, cross_validate=False)
+
+
+def _reduced_jacobian(layout: AccelerometerLayout, motions: Sequence[MotionData], w: np.ndarray,
+                      levers: list[np.ndarray], Ss: list[np.ndarray]
+                      ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Variable projection at w: (Jacobian (rows, 3C), residual (rows,), motions [(K, 6)]).
+
+    For given sensitivities every harmonic's motion is a linear least-squares solution; what remains
+    is a problem in the sensitivities alone, whose Jacobian is the readings' Jacobian with respect to
+    w projected off the columns the motion can explain (Kaufman's form). Its null space is the set of
+    sensitivity changes some change of the motions hides: the unobserved directions.
+    """
+    C = layout.num_channels
+    Us, J, r = [], [], []
+    for m, S, lv in zip(motions, Ss, levers):
+        Y = m.phasors - S
+        U = _solve_motions(w, Y, lv)
+        Us.append(U)
+        V = _rows(U, lv)  # (K, C, 3): d reading_c / d w_c
+        H = np.concatenate([np.broadcast_to(w, lv.shape), np.cross(lv, w[None])], axis=2)  # (K, C, 6)
+        for i in range(Y.shape[0]):
+            q = np.linalg.qr(H[i])[0]
+            Jw = np.zeros((C, C, 3), complex)
+            Jw[np.arange(C), np.arange(C)] = V[i]
+            Jw = Jw.reshape(C, 3 * C)
+            res = Y[i] - H[i] @ U[i]
+            J.append(Jw - q @ (q.T @ Jw))
+            r.append(res)
+    J = np.concatenate(J)
+    r = np.concatenate(r)
+    return np.concatenate([J.real, J.imag]), np.concatenate([r.real, r.imag]), Us
+
+
+def _cost(w: np.ndarray, motions: Sequence[MotionData], Ss: list[np.ndarray], levers: list[np.ndarray]) -> float:
+    """Sum of squared residuals of every reading with the motions fitted for sensitivities w."""
+    total = 0.0
+    for m, S, lv in zip(motions, Ss, levers):
+        Y = m.phasors - S
+        U = _solve_motions(w, Y, lv)
+        total += float(np.sum(np.abs(Y - np.einsum("kcj,cj->kc", _rows(U, lv), w)) ** 2))
+    return total
+
+
 def _fit(layout: AccelerometerLayout, motions: Sequence[MotionData], terms: tuple[str, ...], gravity: float
          ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray, np.ndarray]:
-    """Sensitivities w (C, 3), motions [(K, 6)], residual RMS (C,), unobserved basis (3C, n)."""
+    """Sensitivities w (C, 3), motions [(K, 6)], residual RMS (C,), unobserved basis (3C, n).
+
+    Gauss-Newton on the sensitivities (:func:`_reduced_jacobian`), the second-order terms evaluated at
+    the current motions. Directions the data do not see are fixed by the least change from the
+    nominal sensitivities (and mean gain 1): every step also moves w to the point of its family of
+    equivalent sensitivities nearest the nominal layout, along the unobserved directions at w (the
+    family is curved: a common rotation of axes is one of its directions).
+    """
     C = layout.num_channels
     levers = _levers(layout, motions, gravity)
     w = layout.axis.copy()
-    Us = [_solve_motions(w, m.phasors, lv) for m, lv in zip(motions, levers)]
-    for _ in range(MAX_PASSES):
-        axis = w / np.linalg.norm(w, axis=1)[:, None]
-        Ss = [_second_order(U, m, layout, axis, terms, gravity) for U, m in zip(Us, motions)]
-        V = np.concatenate([_rows(U, lv) for U, lv in zip(Us, levers)], axis=0)  # (sum K, C, 3)
-        Yc = np.concatenate([m.phasors - S for m, S in zip(motions, Ss)], axis=0)  # (sum K, C)
-        w_new = np.empty_like(w)
-        for c in range(C):
-            A = np.concatenate([V[:, c].real, V[:, c].imag])
-            b = np.concatenate([Yc[:, c].real, Yc[:, c].imag])
-            w_new[c] = np.linalg.lstsq(A, b, rcond=None)[0]
-        scale = float(np.mean(np.linalg.norm(w_new, axis=1)))
-        w_new /= scale  # the common gain is unobservable: mean gain 1
+    Ss = [np.zeros_like(m.phasors) for m in motions]
+    ring: list[str] = []
+    basis = np.zeros((3 * C, 0))
+    for i in range(MAX_PASSES):
+        J, r, Us = _reduced_jacobian(layout, motions, w, levers, Ss)
+        if i == 0:  # which of the ring's directions this layout cannot see: decided at the nominal axes
+            ring = unobservable.unseen_directions(layout.position_m, w, J)
+        basis = unobservable.unobserved_basis(layout.position_m, w, J, ring)
+        # Gauss-Newton in the observed directions only (the others are the convention's).
+        perp = np.linalg.svd(np.eye(3 * C) - basis @ basis.T)[0][:, : 3 * C - basis.shape[1]]
+        step = (perp @ np.linalg.lstsq(J @ perp, r, rcond=unobservable.NULL_TOLERANCE)[0]).reshape(w.shape)
+        # Backtracking: the reduced problem is not linear; a full step may overshoot, so halve it
+        # until the misfit drops.
+        cost = float(r @ r)
+        for _halving in range(MAX_HALVINGS):
+            w_new = w + step
+            if _cost(w_new, motions, Ss, levers) <= cost:
+                break
+            step = step / 2
+        else:
+            w_new = w
+        # The common gain is fixed by the mean gain, the other unobserved directions by the least change.
+        gain_dir = w.reshape(-1, 1) / np.linalg.norm(w)  # in the basis at w: removing it drops one
+        q, sv, _ = np.linalg.svd(basis - gain_dir @ (gain_dir.T @ basis), full_matrices=False)
+        q = q[:, sv > 0.5]
+        w_new = w_new - (q @ (q.T @ (w_new - layout.axis).reshape(-1))).reshape(w.shape)
+        w_new /= float(np.mean(np.linalg.norm(w_new, axis=1)))
         change = float(np.linalg.norm(w_new - w) / np.linalg.norm(w))
         w = w_new
-        Us = [_solve_motions(w, m.phasors - S, lv) for m, S, lv in zip(motions, Ss, levers)]
+        Ss = [_second_order(U, m, layout, w, terms, gravity) for U, m in zip(Us, motions)]
         if change < PASS_TOLERANCE:
             break
-    # Directions the data do not see are fixed by the least change from the nominal sensitivities
-    # (then mean gain 1 again): the data cannot tell them, so the nominal layout decides.
-    null = _null_space(layout, motions, w, Us, gravity)
-    if null.shape[1]:
-        d = (w - layout.axis).reshape(-1)
-        w = w - (null @ (null.T @ d)).reshape(w.shape)
-        w /= float(np.mean(np.linalg.norm(w, axis=1)))
-        axis = w / np.linalg.norm(w, axis=1)[:, None]
-        Ss = [_second_order(U, m, layout, axis, terms, gravity) for U, m in zip(Us, motions)]
-        Us = [_solve_motions(w, m.phasors - S, lv) for m, S, lv in zip(motions, Ss, levers)]
+    Us = [_solve_motions(w, m.phasors - S, lv) for m, S, lv in zip(motions, Ss, levers)]
     res = np.concatenate([
         m.phasors - S - np.einsum("kcj,cj->kc", _rows(U, lv), w) for m, S, U, lv in zip(motions, Ss, Us, levers)
     ])
     rms = np.sqrt(np.mean(np.abs(res) ** 2, axis=0))
-    return w, Us, rms, null
+    return w, Us, rms, basis
+
+
+def _describe_unobserved(layout: AccelerometerLayout, w: np.ndarray, null: np.ndarray) -> tuple[str, ...]:
+    """The unobserved directions by name (:data:`unobservable.DIRECTIONS`), each with its convention."""
+    names, others = unobservable.name_directions(layout.position_m, w, null)
+    out = [f"{n} (fixed: {'mean gain = 1' if i == 0 else 'least change from the nominal axes'})"
+           for i, n in enumerate(names)]
+    if others:
+        out.append(f"{others} more combinations of the sensitivities and the motions (fixed: least change from "
+                   f"the nominal axes)")
+    return tuple(out)
 
 
 def _check_conditioning(layout: AccelerometerLayout, motions: Sequence[MotionData], gravity: float) -> None:
@@ -363,14 +452,7 @@ def calibrate(layout: AccelerometerLayout, motions: Sequence[MotionData], *,
         gain_std[c] = math.sqrt(max(e @ cov @ e, 0.0))
         perp = cov - np.outer(cov @ e, e) - np.outer(e, e @ cov) + (e @ cov @ e) * np.outer(e, e)
         axis_std[c] = math.degrees(math.sqrt(max(np.trace(perp), 0.0)) / gain[c])
-    unobservable = ["common gain of all channels (fixed: mean gain = 1)"]
-    if null.shape[1] > 1:
-        unobservable.append(
-            f"{null.shape[1] - 1} more combinations of the sensitivities (with the motions), of the form "
-            f"A w_c + B (l_c x w_c), that a coplanar array cannot see, e.g. a common tilt of the "
-            f"tangential axes out of the plate, which trades with alpha_z (fixed: least change from the "
-            f"nominal axes)"
-        )
+    unobservable_directions = _describe_unobserved(layout, w, null)
     report: dict[str, dict[str, float]] = {}
     per_channel = []
     if cross_validate and len(motions) >= 3:
@@ -392,43 +474,8 @@ def calibrate(layout: AccelerometerLayout, motions: Sequence[MotionData], *,
     else:
         misfit = np.median(np.array([_misfit(layout, w, m, terms, gravity_mps2)[1] for m in motions]), axis=0)
     return AccelCalibration(layout.names, gain, axis, layout.axis.copy(), layout.position_m.copy(), gain_std,
-                            axis_std, misfit, tuple(m.name for m in motions), tuple(unobservable), report,
+                            axis_std, misfit, tuple(m.name for m in motions), unobservable_directions, report,
                             unobserved_basis=null)
-
-
-def _null_space(layout: AccelerometerLayout, motions: Sequence[MotionData], w: np.ndarray,
-                Us: list[np.ndarray], gravity: float) -> np.ndarray:
-    """Orthonormal basis (3C, n) of the sensitivity parts of the directions the readings do not see.
-
-    The Jacobian of every reading with respect to all sensitivities and all motions (real and
-    imaginary parts) is taken at the fit; its null space, projected on the sensitivities.
-    """
-    levers = _levers(layout, motions, gravity)
-    C = layout.num_channels
-    n_u = sum(6 * m.k.size for m in motions)
-    blocks, col = [], 0
-    for m, U, lv in zip(motions, Us, levers):
-        V = _rows(U, lv)
-        K = m.k.size
-        Jw = np.zeros((K, C, C, 3), complex)
-        for c in range(C):
-            Jw[:, c, c] = V[:, c]
-        H = np.concatenate([np.broadcast_to(w, lv.shape), np.cross(lv, w[None])], axis=2)
-        Ju = np.zeros((K, C, n_u), complex)
-        for i in range(K):
-            Ju[i, :, col + 6 * i : col + 6 * i + 6] = H[i]
-        col += 6 * K
-        blocks.append(np.concatenate([Jw.reshape(K * C, 3 * C), Ju.reshape(K * C, n_u),
-                                      1j * Ju.reshape(K * C, n_u)], axis=1))
-    J = np.concatenate(blocks)
-    J = np.concatenate([J.real, J.imag])
-    norms = np.maximum(np.linalg.norm(J, axis=0), 1e-300)
-    _, s, vt = np.linalg.svd(J / norms, full_matrices=False)
-    null = vt[s < s[0] * NULL_TOLERANCE] / norms  # back to unscaled parameters
-    if null.size == 0:
-        return np.zeros((3 * C, 0))
-    q, r = np.linalg.qr(null[:, : 3 * C].T)
-    return q[:, np.abs(np.diag(r)) > 1e-12 * np.abs(r).max()]
 
 
 # ---------------------------------------------------------------------- store
@@ -454,6 +501,7 @@ __all__ = [
     "MotionData",
     "calibrate",
     "calibration_path",
+    "equivalent_calibration",
     "load_calibration",
     "save_calibration",
 ]

@@ -516,6 +516,7 @@ def _real_section(args: argparse.Namespace, out: Path) -> dict:
         est_rows.append({"record": name, "vs_lab": err, "dropped": est.dropped})
         print(f"{name:12s} {est.frequency_hz:7.2f} {100 * err:7.2f}%  {list(est.dropped) or '-'}")
     fault_rows = {}
+    same_signal = 0
     for fault, (n, _) in FAULTS.items():
         cases = caught = 0
         for name, rec in records.items():
@@ -523,8 +524,11 @@ def _real_section(args: argparse.Namespace, out: Path) -> dict:
                 continue
             y = rec.samples_mps2
             live = np.flatnonzero(np.sqrt(np.mean(y**2, axis=0)) >= 1.0)
-            combos = [(c,) for c in live] if n == 1 else [
-                (a, b) for i, a in enumerate(live) for b in live[i + 1:] if swap_matters(y, a, b)]
+            pairs = [(a, b) for i, a in enumerate(live) for b in live[i + 1:]]
+            # A swap of two channels carrying nearly the same signal on this record changes nothing
+            # the record can show: such pairs are not cases (swap_matters, half the larger reading).
+            combos = [(c,) for c in live] if n == 1 else [p for p in pairs if swap_matters(y, *p)]
+            same_signal += 0 if n == 1 else len(pairs) - len(combos)
             for chans in combos:
                 cases += 1
                 try:
@@ -538,6 +542,13 @@ def _real_section(args: argparse.Namespace, out: Path) -> dict:
     print("\nInjected faults on live channels (>= 1 m/s^2 RMS) of the 9 driven records: caught / cases")
     for fault, (c, n) in fault_rows.items():
         print(f"  {fault:8s} {c:4d} / {n:4d}  ({100 * c / n:.1f} %)")
+    print(f"  (swapped: {same_signal} pairs of live channels not counted, their readings on that record "
+          f"differing by less than half the larger: swap_matters)")
+    swap_effect = _swaps_by_effect(layout, records)
+    c, n = swap_effect
+    print(f"  swapped, every pair of live channels whose swap moves an estimate that trusts every channel by "
+          f">= {100 * SWAP_EFFECT:.0f} % (the rest move it by less): "
+          f"{c} / {n} ({100 * c / n:.1f} %)")
     dead = {"all zero": lambda y: np.zeros_like(y), "stuck ADC": lambda y: np.broadcast_to(y[0], y.shape).copy(),
             "stopped": lambda y: np.vstack([y[: y.shape[0] // 2], np.broadcast_to(y[y.shape[0] // 2 - 1],
                                                                                   (y.shape[0] - y.shape[0] // 2,
@@ -561,7 +572,42 @@ def _real_section(args: argparse.Namespace, out: Path) -> dict:
         print(f"{name:14s} {100 * v['nominal']:8.2f}% {100 * v['calibrated']:10.2f}%")
     print("gains: " + " ".join(f"{n} {g:.3f}" for n, g in zip(cal.names, cal.gain)))
     print("axis changes (deg): " + " ".join(f"{n} {d:.1f}" for n, d in zip(cal.names, cal.axis_change_deg)))
-    return {"estimation": est_rows, "faults": fault_rows, "dead": dead_rows, "calibration": cal.report}
+    return {"estimation": est_rows, "faults": fault_rows, "swapped_by_effect": swap_effect, "dead": dead_rows,
+            "calibration": cal.report}
+
+
+#: A swap counts as a case of the effect rule when it moves the all-channel estimate by this fraction of it.
+SWAP_EFFECT = 0.01
+
+
+def _swaps_by_effect(layout, records) -> tuple[int, int]:
+    """(caught, cases) over every pair of live channels whose swap moves the all-channel estimate >= SWAP_EFFECT."""
+    from ppod_ros.estimation import AccelEstimator, EstimationError, HealthSettings
+    from ppod_ros.estimation.faults import inject
+    from ppod_ros.motion import acceleration_error
+
+    trusting = HealthSettings(residual_threshold=1e12)  # no residual drops: what the swap does to the estimate
+    cases = caught = 0
+    for name, rec in records.items():
+        if name == "Zeros":
+            continue
+        y = rec.samples_mps2
+        base = AccelEstimator(layout, harmonics=6, health=trusting).from_cycle(y, rec.sample_rate_hz).table(6)
+        live = np.flatnonzero(np.sqrt(np.mean(y**2, axis=0)) >= 1.0)
+        for i, a in enumerate(live):
+            for b in live[i + 1:]:
+                z = inject(y, "swapped", (a, b))
+                moved = AccelEstimator(layout, harmonics=6, health=trusting).from_cycle(z, rec.sample_rate_hz)
+                if acceleration_error(base, moved.table(6))[1] < SWAP_EFFECT:
+                    continue
+                cases += 1
+                try:
+                    est = AccelEstimator(layout, harmonics=6).from_cycle(z, rec.sample_rate_hz)
+                except EstimationError:
+                    caught += 1
+                    continue
+                caught += all(layout.names[c] in est.dropped for c in (a, b))
+    return caught, cases
 
 
 def _calibration_section(args: argparse.Namespace, out: Path) -> dict:

@@ -61,6 +61,10 @@ class HealthSettings:
         up to 36 % of a weak channel's reading on the PPOD2 lab's device (docs/feedback.md), while a
         halved, zeroed, sign-flipped or swapped channel misses by 75 % or more. A calibration's
         measured per-channel misfit replaces it (``AccelEstimator(calibration=...)``).
+    swap_ratio : float
+        Two used channels whose exchange leaves at most this fraction of the residual (and one of
+        which misfits by more than ``residual_threshold``) look swapped in wiring: an
+        EstimationError (:mod:`~ppod_ros.estimation.swaps`; healthy real records: 0.77 at best).
     """
 
     min_valid_fraction: float = 0.5
@@ -72,6 +76,7 @@ class HealthSettings:
     residual_threshold: float = 5.0
     model_floor: float = 0.01
     misfit_allowance: float = 0.5
+    swap_ratio: float = 0.5
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], where: str = "health") -> HealthSettings:

@@ -27,6 +27,7 @@ from ppod_ros.errors import ConfigError, DeviceError
 from ppod_ros.estimation.harmonic_fit import HealthSettings
 from ppod_ros.estimation.layout import AccelerometerLayout
 from ppod_ros.estimation.second_order import second_order_phasors
+from ppod_ros.estimation.swaps import exchange_ratios
 from ppod_ros.motion import MAX_HARMONIC, PlateMotion
 
 OK = "ok"
@@ -286,6 +287,7 @@ class SixDofSolver:
                         "after a channel the layout cannot spare became inconsistent",
                     )
             break
+        self._check_swaps(H, Yc, use, z_in, thr, names, status)
         std = np.sqrt(np.einsum("kjc,kc->kj", np.abs(P) ** 2, np.where(use, np.nan_to_num(var), 0.0)))
         Ru = R[:, use]
         return PlateEstimate(
@@ -302,6 +304,29 @@ class SixDofSolver:
             last_change=change,
             cycles=cycles,
             channel_misfit=np.where(use, rel_in, np.nan),
+        )
+
+    def _check_swaps(self, H: np.ndarray, Yc: np.ndarray, use: np.ndarray, z_in: np.ndarray, thr: float,
+                     names: tuple[str, ...], status: list[str]) -> None:
+        """EstimationError when exchanging two used channels explains most of the misfit (:mod:`swaps`)."""
+        cols = np.flatnonzero(use)
+        if cols.size <= 6:
+            return
+        ratio = exchange_ratios(H[:, cols], np.nan_to_num(Yc[:, cols]))
+        significant = z_in[cols] > thr
+        hit = (ratio <= self.health.swap_ratio) & (significant[:, None] | significant[None, :])
+        pairs = sorted(((ratio[a, b], a, b) for a, b in zip(*np.nonzero(np.triu(hit)))), key=lambda p: p[0])
+        if not pairs:
+            return
+        shown = []
+        for r, a, b in pairs[:AMBIGUOUS_SHOWN]:
+            ca, cb = int(cols[a]), int(cols[b])
+            status[ca] = f"swapped with {names[cb]}? (exchanging them leaves {r:.0%} of the misfit)"
+            status[cb] = f"swapped with {names[ca]}? (exchanging them leaves {r:.0%} of the misfit)"
+            shown.append(f"exchanging {names[ca]} and {names[cb]} leaves {r:.0%} of the misfit")
+        raise EstimationError(
+            "accelerometer channels look swapped in wiring: " + "; or ".join(shown) + "; check their wiring",
+            dict(zip(names, status)),
         )
 
     @staticmethod

@@ -1,29 +1,44 @@
-"""Calibrating the simulated device's accelerometer array recovers its injected sensor errors."""
+"""Calibrating the simulated device's accelerometer array recovers its injected sensor errors.
+
+Compared with the truth as the calibration's convention represents it (``equivalent_calibration``:
+the calibration of exact, noise-free readings made with the true sensitivities, which reads every
+rigid motion as they do): the ten directions a coplanar ring cannot see (docs/feedback.md,
+"Calibration") are fixed alike on both sides.
+"""
 
 import numpy as np
 
 from ppod_ros.device import default_device_config
-from ppod_ros.estimation.calibration import load_calibration
+from ppod_ros.estimation.calibration import equivalent_calibration, load_calibration
 from ppod_sim.calibration import calibrate_simulated_device
-from ppod_sim.sensors import DEFAULT_GAINS, DEFAULT_TILTS_DEG, SensorErrors
+from ppod_sim.sensors import DEFAULT_BENDING, DEFAULT_GAINS, DEFAULT_TILTS_DEG, SensorErrors
 
 
-def _truth(cfg, errors):
+def _errors(cfg, cal, errors):
     w, _ = errors.sensing(np.asarray(cfg.accelerometers.position_m), np.asarray(cfg.accelerometers.axis))
-    g = np.linalg.norm(w, axis=1)
-    return g / g.mean(), w / g[:, None]
+    truth = equivalent_calibration(cfg.accelerometers.layout, w)
+    ang = np.degrees(np.arccos(np.clip(np.sum(cal.axis * truth.axis, axis=1), -1, 1)))
+    return np.abs(cal.gain - truth.gain), ang
 
 
-def test_gains_within_1_percent_and_axes_within_0_6_degree_without_bending(tmp_path):
+def test_sensor_errors_are_recovered_to_0_1_percent_and_0_1_degree_without_bending(tmp_path):
     cfg = default_device_config()
     errors = SensorErrors(DEFAULT_GAINS, DEFAULT_TILTS_DEG, bending=0.0)
     cal = calibrate_simulated_device(cfg, seed=5, sensor_errors=errors, cache_dir=tmp_path)
-    gain, axis = _truth(cfg, errors)
-    assert np.abs(cal.gain - gain).max() <= 0.01
-    # 0.6, not the issue's 0.5 degree: the tangential pair at +-10 degrees is off by up to 0.58 degree,
-    # along combinations a coplanar array cannot see (docs/feedback.md, "Calibration").
-    ang = np.degrees(np.arccos(np.clip(np.sum(cal.axis * axis, axis=1), -1, 1)))
-    assert ang.max() <= 0.6 and np.median(ang) <= 0.25, ang
+    gain_err, axis_err = _errors(cfg, cal, errors)
+    assert gain_err.max() <= 0.001 and axis_err.max() <= 0.1, (gain_err, axis_err)
     assert load_calibration(tmp_path, cfg.name) is not None  # stored where the feedback looks
     # Held-out motions: the calibrated array explains them much better than the nominal layout.
     assert all(v["calibrated"] < 0.5 * v["nominal"] for v in cal.report.values()), cal.report
+
+
+def test_with_the_default_bending_axes_are_within_half_a_degree_and_gains_within_the_bending():
+    cfg = default_device_config()
+    errors = SensorErrors(DEFAULT_GAINS, DEFAULT_TILTS_DEG, bending=DEFAULT_BENDING)
+    cal = calibrate_simulated_device(cfg, seed=5, sensor_errors=errors)
+    gain_err, axis_err = _errors(cfg, cal, errors)
+    assert axis_err.max() <= 0.5, axis_err
+    assert gain_err[0::2].max() <= 0.01, gain_err  # tangential channels: no bending
+    # Vertical channels: the saddle bending (up to 2 % of p''z, read during the bounce only) is
+    # partly taken into their gains; no more than the bending itself.
+    assert gain_err[1::2].max() <= DEFAULT_BENDING, gain_err

@@ -58,16 +58,20 @@ def test_the_allowance_is_learned_from_healthy_estimates_only_and_used_after_eno
 
 
 @pytest.mark.parametrize("motion", ["LineSinkX", "TransX"])
-def test_the_learned_allowance_catches_a_swap_the_default_cannot_see(motion):
+def test_a_fresh_estimator_catches_the_mirror_image_swap_by_exchanging_the_pair_back(motion):
     # ch3 and ch9 are vertical channels at (x, +-y) (mirror images across the x axis): swapping them
     # reads exactly like reversing alpha_x on those two channels, 2 alpha_x y. LineSinkX and TransX
     # have little roll beside their pitch (which both read alike, at the same x), so the swap misfits
     # by only 27-34 % of their readings: within the default 50 % allowance of a device with no
-    # history (which must pass this device's healthy weak channels, up to 36 %), beyond what ch3 and
-    # ch9 show when healthy (1-6 %), which the learned allowance knows.
+    # history (which must pass this device's healthy weak channels, up to 36 %). Exchanging the two
+    # back leaves 27-34 % of the misfit; no exchange leaves less than 77 % on a healthy record.
     rec = RECORDS[motion]
     y = inject(rec.samples_mps2, "swapped", (3, 9))
-    assert AccelEstimator(LAYOUT, harmonics=6).from_cycle(y, rec.sample_rate_hz).dropped == {}
+    with pytest.raises(EstimationError, match="swapped in wiring: exchanging ch3 and ch9") as info:
+        AccelEstimator(LAYOUT, harmonics=6).from_cycle(y, rec.sample_rate_hz)
+    assert info.value.channel_status["ch3"].startswith("swapped with ch9?")
+    assert info.value.channel_status["ch9"].startswith("swapped with ch3?")
+    # The learned allowance (ch3, ch9 misfit 1-6 % when healthy) sees it as well.
     allow = _learned().allowance()
     try:
         est = AccelEstimator(LAYOUT, harmonics=6, misfit_allowance=allow).from_cycle(y, rec.sample_rate_hz)

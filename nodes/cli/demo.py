@@ -27,6 +27,7 @@ examples:
   ppod demo --part bracket --goal 0.02 -0.02 0 one part with MovePart, the others gathered
   ppod demo --part washer --goal 0.03 0.03     a point part (position only)
   ppod demo --goal 0 -0.03 90 --out out/demo2
+  ppod demo --part washer --goal 0.03 0.03 --no-collect   the model-predictive planner for one part
   ppod demo --no-collect --verbose             only the chosen part counts; every node's log shown
 """
 
@@ -64,8 +65,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "cross-coupling and third-harmonic errors that the accelerometer feedback "
                              "learns), or 'zero' (the plate moves as the nominal model says)")
     parser.add_argument("--no-collect", action="store_true",
-                        help="finish as soon as the chosen part is there (default: also wait, up to half the "
-                             "timeout, until the others are gathered within 40 mm of the goal)")
+                        help="one part: only the chosen part counts, moved by the model-predictive planner, "
+                             "done as soon as it is there (default: the template planner also gathers the "
+                             "others, waiting up to half the timeout until they are within 40 mm of the goal)")
     parser.add_argument("--timeout", type=float, default=90.0,
                         help="device-clock s for the goal (or the whole set of goals) from its start (default 90)")
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")

@@ -58,7 +58,7 @@ from ppod_ros.device import load_device_config
 from ppod_ros.errors import ConfigError, PpodError
 from ppod_ros.parts import Footprint, PointPart, part_from_dict, part_from_yaml_text
 from ppod_ros.planning import FieldSpec, SensorlessTask, Task, design_field, plan_sensorless
-from ppod_ros.planning.mpc import BASE_KINDS, MultiTask, PartGoal, base_design
+from ppod_ros.planning.mpc import MultiTask, PartGoal, base_design, base_kinds
 
 
 def part_models_from_tracker_file(path: str | Path, default_mu: float) -> dict[str, Any]:
@@ -197,7 +197,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         tracker = params["tracker_config"] or str(resources.files("ppod_ros") / "data" / "tracker.yaml")
         self.models = part_models_from_tracker_file(tracker, params["default_mu"])
         self.get_logger().info(f"part models: {', '.join(f'{k} ({v.kind})' for k, v in self.models.items())}")
-        for kind in BASE_KINDS:  # the MoveParts planner's templates, designed once here
+        for kind in base_kinds():  # the MoveParts planner's templates, designed once here
             base_design(kind, self.device)
 
     def on_deactivate_node(self):

@@ -14,8 +14,9 @@ planner chooses the plate motion itself, not a field kind:
             closer than their footprints plus ``clearance_m`` are penalised; a candidate that
             loses contact at any commanded part is rejected.
   search    candidates: the last motion, the plate at rest, the template fields (the sink
-            centred on each goal, a rotation about a rigid part, the orienting motion through its
-            goal; designed once at the centre and moved with exact shifts), then Gauss-Newton
+            centred on each goal, a rotation about a rigid part both ways, the orienting motion
+            through its goal; designed once at the centre and moved with exact transformations;
+            the best few ranked fitted into the envelope), then Gauss-Newton
             steps on the 11 (one frequency) or 23 (two) real inputs from the best of them,
             with finite-difference Jacobians evaluated in one batched call and a trust region
             (``max_change``, relative to the typical axis scales) so a switch is a small change:
@@ -324,6 +325,19 @@ def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> Pl
 TEMPLATES: dict[str, Callable] = {"sink": _template_sink, "transport": _template_transport,
                                   "line": _template_line, "rotation": _template_rotation,
                                   "orient": _template_orient}
+
+
+# The centre design each template kind is moved from (None: built directly).
+TEMPLATE_BASES: dict[str, str | None] = {"sink": "sink", "transport": "transport", "line": "line_sink",
+                                         "rotation": "rotation", "orient": None}
+
+
+def base_kinds(settings: MpcSettings | None = None) -> list[str]:
+    """The centre designs ``settings`` (its templates and pair lines) uses: what a node designs when
+    it configures, so the first replanning step does not pay them."""
+    s = settings or MpcSettings()
+    kinds = {TEMPLATE_BASES[k] for k in s.templates} | ({"line_sink"} if s.pair_lines else set())
+    return [k for k in BASE_KINDS if k in kinds]
 
 
 def line_through(planner: MultiTask, a: PartGoal, b: PartGoal) -> PlateMotion:
@@ -876,5 +890,6 @@ class MultiTask:
         return self.finished
 
 
-__all__ = ["BASE_KINDS", "TEMPLATES", "MpcSettings", "MultiStep", "MultiTask", "PartGoal", "PartStatus", "base_design",
-           "check_goals", "line_through", "moved", "part_radius_m", "ramped_displacement", "template_motion"]
+__all__ = ["BASE_KINDS", "TEMPLATES", "TEMPLATE_BASES", "MpcSettings", "MultiStep", "MultiTask", "PartGoal",
+           "PartStatus", "base_design", "base_kinds", "check_goals", "line_through", "moved", "part_radius_m",
+           "ramped_displacement", "template_motion"]

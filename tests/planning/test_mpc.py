@@ -374,3 +374,13 @@ def test_focus_never_lowers_the_weight_of_a_part_held_at_its_goal():
     assert weight[0] == 1.0                             # the focused part
     assert weight[1] == s.hold_weight                   # held: never lowered
     assert weight[2] == s.focus_others                  # another unfinished part: lowered
+
+
+def test_the_node_designs_only_the_centre_designs_its_templates_use():
+    from ppod_ros.planning.mpc import TEMPLATE_BASES, base_kinds
+
+    assert set(TEMPLATE_BASES) == set(TEMPLATES)
+    assert base_kinds() == ["sink", "rotation"]
+    assert base_kinds(MpcSettings(templates=("sink", "line"), pair_lines=True)) == ["sink", "line_sink"]
+    with pytest.raises(ConfigError, match="templates: unknown kind 'spiral'"):
+        MpcSettings(templates=("sink", "spiral"))

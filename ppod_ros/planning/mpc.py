@@ -269,15 +269,10 @@ def moved(base: PlateMotion, x0: float, y0: float, *, angle_rad: float = 0.0, mi
     return PlateMotion.from_phasors(base.frequency_hz, [1], X, name=name or base.name)
 
 
-def rotation_about(base: PlateMotion, x0: float, y0: float, reverse: bool, name: str) -> PlateMotion:
-    """The rotation template (designed about the centre) about (x0, y0), the other way if ``reverse``."""
-    return moved(base, x0, y0, mirror=reverse, name=name)
-
-
 # The template fields, by kind: one table (an unknown kind raises). Each builds a motion from
-# (planner, goal, pose), or None where it does not apply.
-def _template_sink(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion:
-    return moved(planner._base("sink"), goal.x_m, goal.y_m, name=f"sink@{goal.index}")
+# (planner, goal, pose) the list of its motions, empty where it does not apply.
+def _template_sink(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
+    return [moved(planner._base("sink"), goal.x_m, goal.y_m, name=f"sink@{goal.index}")]
 
 
 def _heading(goal: PartGoal, pose: np.ndarray) -> float | None:
@@ -285,22 +280,22 @@ def _heading(goal: PartGoal, pose: np.ndarray) -> float | None:
     return math.atan2(d[1], d[0]) if math.hypot(*d) > goal.position_tol_m else None
 
 
-def _template_transport(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion | None:
+def _template_transport(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
     """Every part carried the way this part has to go (a uniform field)."""
     heading = _heading(goal, pose)
     if heading is None:
-        return None
-    return moved(planner._base("transport"), 0.0, 0.0, angle_rad=heading, name=f"carry@{goal.index}")
+        return []
+    return [moved(planner._base("transport"), 0.0, 0.0, angle_rad=heading, name=f"carry@{goal.index}")]
 
 
-def _template_line(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion | None:
+def _template_line(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
     """A line sink through the goal, across the way to it: the part is driven straight at the line,
     and parts on the line stay."""
     heading = _heading(goal, pose)
     if heading is None:
-        return None
-    return moved(planner._base("line_sink"), goal.x_m, goal.y_m, angle_rad=heading + math.pi / 2,
-                 name=f"line@{goal.index}")
+        return []
+    return [moved(planner._base("line_sink"), goal.x_m, goal.y_m, angle_rad=heading + math.pi / 2,
+                  name=f"line@{goal.index}")]
 
 
 def _template_rotation(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
@@ -309,17 +304,17 @@ def _template_rotation(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> 
     prediction chooses."""
     if goal.theta_rad is None:
         return []
-    return [rotation_about(planner._base("rotation"), float(pose[0]), float(pose[1]), reverse,
-                           f"turn{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
+    return [moved(planner._base("rotation"), float(pose[0]), float(pose[1]), mirror=reverse,
+                  name=f"turn{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
 
 
-def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> PlateMotion | None:
+def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
     if goal.theta_rad is None:
-        return None
+        return []
     from ppod_ros.planning.design import ORIENT_FREQUENCY_HZ
 
     X = orient_phasors(goal.x_m, goal.y_m, goal.theta_rad)
-    return PlateMotion.from_phasors(ORIENT_FREQUENCY_HZ, [1], X[None], name=f"orient@{goal.index}")
+    return [PlateMotion.from_phasors(ORIENT_FREQUENCY_HZ, [1], X[None], name=f"orient@{goal.index}")]
 
 
 TEMPLATES: dict[str, Callable] = {"sink": _template_sink, "transport": _template_transport,
@@ -353,8 +348,7 @@ def template_motion(kind: str, planner: MultiTask, goal: PartGoal, pose: np.ndar
         build = TEMPLATES[kind]
     except KeyError:
         raise ConfigError(f"kind: unknown template field {kind!r}; expected one of {', '.join(TEMPLATES)}") from None
-    out = build(planner, goal, pose)
-    return [] if out is None else list(out) if isinstance(out, list) else [out]
+    return build(planner, goal, pose)
 
 
 # ---------------------------------------------------------------------------------- the planner

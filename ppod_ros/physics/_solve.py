@@ -318,12 +318,11 @@ def _push(Xh, Fh, q, depth, x, f):
 
 
 @njit(cache=True, error_model="numpy")
-def _secant_step(CX, CF, m, dim, tolv, x, f):
-    """x <- x + f - (dX + dF) gamma, gamma = argmin |f - dF gamma| over m given secant differences
-    (tolerance-scaled, Tikhonov-regularised as in :func:`_anderson`); the plain step x + f when the
-    fit is singular or the step would exceed 1e4 plain steps."""
+def _secant_gamma(CF, m, dim, tolv, f, g):
+    """g <- gamma = argmin |f - dF gamma| over the m secant differences dF (rows of CF), components
+    scaled by their tolerances, Tikhonov-regularised by 1e-10 of the Gram matrix's trace. False
+    when the fit is singular."""
     G = np.zeros(m * m)
-    g = np.zeros(m)
     for a in range(m):
         for b in range(m):
             acc = 0.0
@@ -339,73 +338,61 @@ def _secant_step(CX, CF, m, dim, tolv, x, f):
         tr += G[a * m + a]
     for a in range(m):
         G[a * m + a] += 1e-10 * tr + 1e-300
+    return gauss_solve(G, 0, g, 0, m) != 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def _secant_correction(CX, CF, g, m, dim, tolv, f, corr):
+    """corr <- (dX + dF) gamma. False for a wild extrapolation, a step f - corr over 1e4 plain steps
+    f (keep the plain step then; large ones are legitimate: a map that barely contracts, rate 0.999
+    say, has its fixed point 1000 residuals away)."""
+    step = 0.0
     plain = 0.0
     for j in range(dim):
-        plain = max(plain, abs(f[j]) / tolv[j])
-    if gauss_solve(G, 0, g, 0, m) == 0.0:
-        for j in range(dim):
-            x[j] += f[j]
-        return
-    step = 0.0
-    for j in range(dim):
-        corr = 0.0
+        c = 0.0
         for a in range(m):
-            corr += g[a] * (CX[a, j] + CF[a, j])
-        step = max(step, abs(f[j] - corr) / tolv[j])
+            c += g[a] * (CX[a, j] + CF[a, j])
+        corr[j] = c
+        step = max(step, abs(f[j] - c) / tolv[j])
+        plain = max(plain, abs(f[j]) / tolv[j])
+    return step <= 1e4 * plain
+
+
+@njit(cache=True, error_model="numpy")
+def _secant_step(CX, CF, m, dim, tolv, x, f):
+    """x <- x + f - (dX + dF) gamma over m given secant differences (:func:`_secant_gamma`,
+    :func:`_secant_correction`); the plain step x + f when the fit is singular or the step wild."""
+    g = np.zeros(m)
+    corr = np.zeros(dim)
+    if _secant_gamma(CF, m, dim, tolv, f, g) and _secant_correction(CX, CF, g, m, dim, tolv, f, corr):
+        for j in range(dim):
+            x[j] += f[j] - corr[j]
+        return
     for j in range(dim):
-        corr = 0.0
-        if step <= 1e4 * plain:
-            for a in range(m):
-                corr += g[a] * (CX[a, j] + CF[a, j])
-        x[j] += f[j] - corr
+        x[j] += f[j]
 
 
 @njit(cache=True, error_model="numpy")
 def _anderson(Xh, Fh, q, dim, tolv, x):
-    """x <- x_k + f_k - (dX + dF) gamma, gamma = argmin |f_k - dF gamma| (components scaled by
-    their tolerances); with one stored pair this is the plain step x_k + f_k."""
+    """x <- x_k + f_k - (dX + dF) gamma, the secant step over the stored pairs' differences; with one
+    stored pair this is the plain step x_k + f_k."""
     k = q - 1
     m = q - 1
     for j in range(dim):
         x[j] = Xh[k, j] + Fh[k, j]
     if m == 0:
         return
-    G = np.zeros(m * m)
-    g = np.zeros(m)
+    CX = np.empty((m, dim))
+    CF = np.empty((m, dim))
     for a in range(m):
-        for b in range(m):
-            acc = 0.0
-            for j in range(dim):
-                acc += (Fh[a + 1, j] - Fh[a, j]) * (Fh[b + 1, j] - Fh[b, j]) / (tolv[j] * tolv[j])
-            G[a * m + b] = acc
-        acc = 0.0
         for j in range(dim):
-            acc += (Fh[a + 1, j] - Fh[a, j]) * Fh[k, j] / (tolv[j] * tolv[j])
-        g[a] = acc
-    tr = 0.0
-    for a in range(m):
-        tr += G[a * m + a]
-    for a in range(m):
-        G[a * m + a] += 1e-10 * tr + 1e-300
-    if gauss_solve(G, 0, g, 0, m) == 0.0:
-        return
-    step = 0.0
-    plain = 0.0
-    for j in range(dim):
-        corr = 0.0
-        for a in range(m):
-            corr += g[a] * ((Xh[a + 1, j] - Xh[a, j]) + (Fh[a + 1, j] - Fh[a, j]))
-        step = max(step, abs(Fh[k, j] - corr) / tolv[j])
-        plain = max(plain, abs(Fh[k, j]) / tolv[j])
-    if not (step <= 1e4 * plain):
-        # A wild extrapolation: keep the plain step. (Large ones are legitimate: a map that barely
-        # contracts, rate 0.999 say, has its fixed point 1000 residuals away.)
-        return
-    for j in range(dim):
-        corr = 0.0
-        for a in range(m):
-            corr += g[a] * ((Xh[a + 1, j] - Xh[a, j]) + (Fh[a + 1, j] - Fh[a, j]))
-        x[j] -= corr
+            CX[a, j] = Xh[a + 1, j] - Xh[a, j]
+            CF[a, j] = Fh[a + 1, j] - Fh[a, j]
+    g = np.zeros(m)
+    corr = np.zeros(dim)
+    if _secant_gamma(CF, m, dim, tolv, Fh[k], g) and _secant_correction(CX, CF, g, m, dim, tolv, Fh[k], corr):
+        for j in range(dim):
+            x[j] -= corr[j]
 
 
 # ------------------------------------------------------------------ all configurations

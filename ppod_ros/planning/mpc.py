@@ -68,7 +68,8 @@ class MpcSettings:
     headroom: float = 0.15                # fraction under every device limit
     plant_tolerance: PlantTolerance | None = PlantTolerance()  # actuator errors whose corrected tables must
                                           # pass the checker too (planning/envelope.py); None: nominal only
-    max_speed_mps: float = 0.008          # waypoint distance per horizon second
+    max_speed_mps: float = 0.015          # waypoint distance per horizon second (0.008 before the spin and
+                                          # transport templates: one bracket median 16 s against 9 s)
     max_turn_radps: float = 0.5           # angular waypoint per horizon second
     angle_weight_m_per_rad: float = 0.03  # an angle error of 1 rad costs as much as 30 mm
     angle_from_m: float = 0.01            # ... within this distance of the goal; farther, the angle weight
@@ -105,14 +106,20 @@ class MpcSettings:
     settle_s: float = 0.5                 # within tolerance for this long: reached
     lost_after_s: float = 6.0             # a commanded part unseen this long: failed (touching parts
                                           # are lost by the tracker for a while)
-    templates: tuple[str, ...] = ("sink", "rotation", "orient")  # TEMPLATES tried per goal (with "transport"
-                                          # and "line" too, 2 of 8 benchmark scenes of 3 parts against 5 of 8:
-                                          # the 1 s horizon takes their fast gains for one part at the others' cost)
+    templates: tuple[str, ...] = ("sink", "rotation", "orient", "spin", "transport")  # TEMPLATES tried per
+                                          # goal (with "line" too, and without the spin, 2 of 8 benchmark
+                                          # scenes of 3 parts against 5 of 8: the 1 s horizon takes its fast
+                                          # gains for one part at the others' cost)
     pair_lines: bool = False              # the line sink through every two goals whose parts are near them
                                           # (4 of 8 against 5 of 8)
     template_sink_gain_per_s: float = 0.3
-    template_speed_mps: float = 0.01
+    template_speed_mps: float = 0.02      # the transport design (point part; a bracket about 15 mm/s)
     template_turn_radps: float = 0.3
+    spin_angular_radps2: float = 400.0    # the spin template: the plate turning about z through the part
+    spin_vertical_mps2: float = 4.0       # with a vertical acceleration in phase (fitted into the envelope):
+                                          # normal force high while the plate turns one way, low the other,
+                                          # so a rigid part turns in place (bracket 0.35 rad/s in the model,
+                                          # the rotation design 0.045 rad/s)
 
     def __post_init__(self):
         for name in ("replan_period_s", "horizon_s", "frequency_hz", "max_speed_mps", "max_turn_radps",
@@ -308,6 +315,25 @@ def _template_rotation(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> 
                   name=f"turn{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
 
 
+def spin_motion(settings: MpcSettings) -> PlateMotion:
+    """The spin about the plate centre: alpha_z with a vertical acceleration in phase (harmonic 1 at
+    the planner's frequency), before fitting into the envelope. Moved to a rigid part, it turns the
+    part in place, whatever its orientation; its mirror image turns it the other way."""
+    X = np.zeros((1, 6), complex)
+    X[0, 2] = settings.spin_vertical_mps2
+    X[0, 5] = settings.spin_angular_radps2
+    return PlateMotion.from_phasors(settings.frequency_hz, [1], X, name="spin")
+
+
+def _template_spin(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
+    """A rigid part turned in place, both ways: the spin (fitted at the centre) moved to the part."""
+    if goal.theta_rad is None or not isinstance(planner.parts[goal.index], RigidPart):
+        return []
+    base = planner._fitted(spin_motion(planner.settings))
+    return [moved(base, float(pose[0]), float(pose[1]), mirror=reverse,
+                  name=f"spin{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
+
+
 def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
     if goal.theta_rad is None:
         return []
@@ -319,12 +345,12 @@ def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> li
 
 TEMPLATES: dict[str, Callable] = {"sink": _template_sink, "transport": _template_transport,
                                   "line": _template_line, "rotation": _template_rotation,
-                                  "orient": _template_orient}
+                                  "orient": _template_orient, "spin": _template_spin}
 
 
 # The centre design each template kind is moved from (None: built directly).
 TEMPLATE_BASES: dict[str, str | None] = {"sink": "sink", "transport": "transport", "line": "line_sink",
-                                         "rotation": "rotation", "orient": None}
+                                         "rotation": "rotation", "orient": None, "spin": None}
 
 
 def base_kinds(settings: MpcSettings | None = None) -> list[str]:

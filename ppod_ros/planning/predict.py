@@ -8,7 +8,7 @@ runs them serially on the calling thread: no parallel-call thread wake-up stalls
 machine). A plate at rest (a zero motion) holds every part: velocity 0, valid, without the solver.
 
 The planner's solver settings (:data:`PLANNER_SOLVER`) are the ``fast`` preset, capped at 40 periods and
-5000 steps per period (a stick-slip candidate is given up on, not integrated for seconds), without the
+1500 steps per period (a stick-slip candidate is given up on, not integrated for seconds), without the
 result cache (every candidate is new) on one thread.
 """
 
@@ -26,7 +26,7 @@ from ppod_ros.physics import PRESETS, SolverSettings
 
 #: Solver settings of the planner's small calls: the fast preset, no cache, one thread.
 PLANNER_SOLVER: SolverSettings = PRESETS["fast"].replace(cache=False, threads=1, max_periods=40,
-                                                         max_steps_per_period=5000)
+                                                         max_steps_per_period=1500)
 
 
 def predict_velocities(motions: Sequence[PlateMotion], part: PointPart | RigidPart, configs,

@@ -137,6 +137,31 @@ def test_template_table_dispatches_and_unknown_kind_raises():
     assert ok.all() and np.hypot(*v[0, 0]) < 0.1 * np.hypot(*v[0, 1])
 
 
+def test_the_spin_turns_a_rigid_part_in_place_both_ways_and_faster_than_the_rotation_design():
+    task = MultiTask([published_rigid_part()], [PartGoal(0, 0.01, 0.0, 0.5)])
+    # Near the centre: farther out the coil heating of moving the plate centre (alpha x r0) caps the
+    # spin's amplitude, and below about 0.9 of it the bracket's contacts stick and slip in turn.
+    poses = [np.array([0.012, -0.006, a]) for a in (0.0, 1.0, 2.5)]
+    for pose in poses:
+        spins = template_motion("spin", task, task.goals[0], pose)
+        turns = template_motion("rotation", task, task.goals[0], pose)
+        v, ok = predict.predict_velocities([task._fitted(m) for m in spins + turns], task.parts[0], [pose])
+        assert len(spins) == 2 and ok.all()
+        # Both ways, whatever the part's orientation (not equally: the mirror image of the bracket is
+        # not the bracket); in place (under 1 mm/s).
+        assert v[0, 0, 2] > 0.1 and v[1, 0, 2] < -0.1
+        assert abs(v[0, 0, 2] + v[1, 0, 2]) < 0.35 * v[0, 0, 2]
+        assert np.hypot(*v[:2, 0, :2].T).max() < 1e-3
+        # The vertical acceleration in phase with the turn is what turns a rigid part: the point-part
+        # rotation design turns it at least twice as slowly.
+        assert abs(v[2:, 0, 2]).max() < 0.5 * v[0, 0, 2]
+    # Only for a rigid part with a goal angle.
+    point = MultiTask([PointPart(0.3)], [PartGoal(0, 0.01, 0.0)])
+    assert template_motion("spin", point, point.goals[0], poses[0]) == []
+    no_angle = MultiTask([published_rigid_part()], [PartGoal(0, 0.01, 0.0)])
+    assert template_motion("spin", no_angle, no_angle.goals[0], poses[0]) == []
+
+
 def test_envelope_keeps_headroom_under_every_limit():
     from ppod_ros.actuation.planning import contact_margin, plate_peaks
 
@@ -380,7 +405,7 @@ def test_the_node_designs_only_the_centre_designs_its_templates_use():
     from ppod_ros.planning.mpc import TEMPLATE_BASES, base_kinds
 
     assert set(TEMPLATE_BASES) == set(TEMPLATES)
-    assert base_kinds() == ["sink", "rotation"]
+    assert base_kinds() == ["sink", "rotation", "transport"]
     assert base_kinds(MpcSettings(templates=("sink", "line"), pair_lines=True)) == ["sink", "line_sink"]
     with pytest.raises(ConfigError, match="templates: unknown kind 'spiral'"):
         MpcSettings(templates=("sink", "spiral"))

@@ -30,6 +30,7 @@ examples:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import json
 import time
@@ -79,12 +80,15 @@ class _Rig:
     """A simulated device, the waveform generator's core and the feedback loop, in this process.
 
     The device runs faster than real time on a virtual CAN bus; ``plant_learning`` False keeps the
-    feedback on the nominal model (every goal starts from zero correction).
+    feedback on the nominal model (every goal starts from zero correction); ``plant_model_allowance``
+    replaces the device's ``limits.plant_model_allowance`` (0: corrections judged through the
+    nominal plant alone).
     """
 
     scale = np.array([1, 1, 1, 0.1, 0.1, 0.1])  # angular axes in m/s^2 at L = 0.1 m (PHYSICS.md)
 
-    def __init__(self, seed: int, plant_learning: bool = True, calibrated: bool = True):
+    def __init__(self, seed: int, plant_learning: bool = True, calibrated: bool = True,
+                 plant_model_allowance: float | None = None):
         from ppod_ros.actuation.generator import WaveformGenerator
         from ppod_ros.actuation.planning import GoalPlanner
         from ppod_ros.can import DeviceLink, open_bus
@@ -94,6 +98,9 @@ class _Rig:
         from ppod_sim.device import SimDevice
 
         config = default_device_config().with_can(interface="virtual", channel=f"bench-fb-{next(_channels)}")
+        if plant_model_allowance is not None:  # 0: plate-side limits through the nominal plant alone
+            limits = dataclasses.replace(config.limits, plant_model_allowance=plant_model_allowance)
+            config = dataclasses.replace(config, limits=limits)
         self.buses = [open_bus(config.can), open_bus(config.can)]
         self.device = SimDevice(config, self.buses[0], seed=seed)
         self.link = DeviceLink(self.buses[1], config)
@@ -146,7 +153,8 @@ class _Rig:
                 if res is None or res.step is None:
                     continue
                 yield res
-                self.gen.apply_correction(goal.key, res.step.k, res.step.correction_a)
+                self.gen.apply_correction(goal.key, res.step.k, res.step.correction_a,
+                                          measured_accel=res.measured_accel, measured_seq=res.table_seq)
                 if until(res):
                     self.summaries.clear()
                     return
@@ -193,15 +201,16 @@ def run_latency(goal, seed: int, latency_s: float, iterations: int = 6, tables: 
                 summaries.append((max(now + lag, held_until[0]), s))
             rig.summaries.clear()
             while corrections and corrections[0][0] <= now:
-                step = corrections.popleft()[1]
-                rig.gen.apply_correction(goal.key, step.k, step.correction_a)
+                res = corrections.popleft()[1]
+                rig.gen.apply_correction(goal.key, res.step.k, res.step.correction_a,
+                                         measured_accel=res.measured_accel, measured_seq=res.table_seq)
             while summaries and summaries[0][0] <= now:
                 s = summaries.popleft()[1]
                 res = rig.loop.on_summary(s.k, s.phasors, goal.frequency_hz, s.samples_per_cycle, now,
                                           s.table_seq if tables else None, s.first_cycle if tables else None)
                 if res is not None and res.step is not None:
                     steps.append((res.step.iteration, res.step.error_relative, s.table_seq))
-                    corrections.append((now + latency_s, res.step))
+                    corrections.append((now + latency_s, res))
     finally:
         rig.close()
     return steps
@@ -268,8 +277,9 @@ def run_switching(seed: int, goals: int = 12, dwell_s: float = 1.5, status_laten
             rows[current["index"]] = {
                 "first": rig.true_error(goal)[0], "source": rig.loop.initial_source or "none",
                 "first_fundamental": float(np.linalg.norm((truth[0] - g) * rig.scale) / np.linalg.norm(g * rig.scale))}
-        step = res.step
-        later(latency_s, lambda: rig.gen.apply_correction(None, step.k, step.correction_a))
+        step, accel, seq = res.step, res.measured_accel, res.table_seq
+        later(latency_s, lambda: rig.gen.apply_correction(None, step.k, step.correction_a, measured_accel=accel,
+                                                          measured_seq=seq))
 
     goals_list = switching_goals(goals, seed)
     try:

@@ -60,3 +60,25 @@ def test_without_bending_the_fitted_bending_stays_near_zero_and_the_estimator_us
     bent = dataclasses.replace(cal, bending=np.array([0.02, 0.0]))
     weights = bent.bending_weights()
     assert np.all(weights[0::2] == 0) and abs(weights[1]) > 0.015  # vertical channels only
+
+
+def test_the_estimator_reads_the_rigid_motion_through_a_calibrations_bending():
+    # Exact summaries of a bounce with a tilt, made by channels that read the saddle (2 % of p''z,
+    # cos 2 theta): with the calibration's bending the estimator returns the motion exactly; with
+    # the bending left out it does not.
+    from ppod_ros.estimation import AccelEstimator
+    from ppod_ros.estimation.calibration import AccelCalibration
+    from ppod_ros.estimation.calibration_fit import bending_shapes
+
+    layout = default_device_config().accelerometers.layout
+    C = layout.num_channels
+    cal = AccelCalibration(layout.names, np.ones(C), layout.axis.copy(), layout.axis.copy(), layout.position_m.copy(),
+                           np.zeros(C), np.zeros(C), np.full(C, 0.01), ("made",), (), bending=np.array([0.02, 0.0]))
+    U = np.array([[0.3, -0.2, 4.0 + 1.0j, 20.0j, -15.0, 2.0]])  # harmonic 1: m/s^2, rad/s^2
+    H = layout.measurement_matrix(2 * np.pi * 30.0, 0.0)
+    Y = (H @ U[0] + bending_shapes(layout) @ cal.bending * U[0, 2])[None]
+    kw = {"harmonics": 1, "second_order_terms": (), "gravity_mps2": 0.0}
+    est = AccelEstimator(layout, calibration=cal, **kw).from_summaries([1], Y, 30.0)
+    np.testing.assert_allclose(est.table(1), U, atol=1e-9)
+    rigid = AccelEstimator(layout, calibration=dataclasses.replace(cal, bending=np.zeros(2)), **kw)
+    assert np.max(np.abs(rigid.from_summaries([1], Y, 30.0).table(1) - U)) > 1e-3

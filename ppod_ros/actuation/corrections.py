@@ -209,7 +209,8 @@ def _over(name: str, nominal: dict[str, float], plate: dict[str, float] | None, 
 
 
 class _MeasuredAnchor:
-    """Prediction of the actual plate under a table: ``measured + P_nominal (T - T_measured)``."""
+    """Prediction of the actual plate under a table: ``measured + P_nominal (T - T_measured)`` on the
+    measured harmonics, the nominal plant's ``P_nominal T`` on table rows above them."""
 
     def __init__(self, planner: GoalPlanner, plan: GoalPlan, measured: MeasuredTable):
         K = plan.currents_a.shape[0]
@@ -225,7 +226,8 @@ class _MeasuredAnchor:
         self.rows = max(K, accel.shape[0])
         self.accel = np.zeros((self.rows, 6), dtype=complex)
         self.accel[: accel.shape[0]] = accel
-        self.accel[:K] -= planner.plant.predict(plan.frequency_hz, plan.currents_a + corr, "accel")
+        rows = min(K, accel.shape[0])
+        self.accel[:rows] -= planner.plant.predict(plan.frequency_hz, plan.currents_a + corr, "accel")[:rows]
 
     def ratios(self, table: np.ndarray) -> dict[str, float]:
         accel = self.accel.copy()

@@ -113,3 +113,19 @@ def test_a_measurement_of_the_wrong_shape_is_refused_naming_the_argument():
     bad = MeasuredTable(np.zeros((1, 6), complex), np.zeros((3, 6), complex))
     with pytest.raises(ConfigError, match="measured.correction_a"):
         planner.correct(plan, np.zeros_like(plan.currents_a), measured=bad)
+
+
+def test_table_rows_above_the_measured_harmonics_are_judged_through_the_nominal_plant():
+    planner = with_allowance(0.25)
+    plan = planner.plan(GOAL)
+    f, K = plan.frequency_hz, plan.currents_a.shape[0]
+    assert K >= 3
+    # A measurement of the fundamental only; the correction asks for current at harmonic 3.
+    measured = planner.plant.predict(f, plan.currents_a, "accel")[:1]
+    step = np.zeros_like(plan.currents_a)
+    step[2] = 0.05
+    res = planner.correct(plan, step, measured=MeasuredTable(np.zeros_like(plan.currents_a), measured))
+    nominal = planner.plant.predict(f, res.currents_a, "accel")
+    expected = planner.envelope.check_plate(f, np.concatenate([measured, nominal[1:]]))[1]
+    for name in PLATE_LIMITS:
+        assert res.measured_ratios[name] == pytest.approx(expected[name], rel=1e-9)

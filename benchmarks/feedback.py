@@ -30,6 +30,7 @@ examples:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import json
 import time
@@ -79,12 +80,15 @@ class _Rig:
     """A simulated device, the waveform generator's core and the feedback loop, in this process.
 
     The device runs faster than real time on a virtual CAN bus; ``plant_learning`` False keeps the
-    feedback on the nominal model (every goal starts from zero correction).
+    feedback on the nominal model (every goal starts from zero correction); ``plant_model_allowance``
+    replaces the device's ``limits.plant_model_allowance`` (0: corrections judged through the
+    nominal plant alone).
     """
 
     scale = np.array([1, 1, 1, 0.1, 0.1, 0.1])  # angular axes in m/s^2 at L = 0.1 m (PHYSICS.md)
 
-    def __init__(self, seed: int, plant_learning: bool = True, calibrated: bool = True):
+    def __init__(self, seed: int, plant_learning: bool = True, calibrated: bool = True,
+                 plant_model_allowance: float | None = None):
         from ppod_ros.actuation.generator import WaveformGenerator
         from ppod_ros.actuation.planning import GoalPlanner
         from ppod_ros.can import DeviceLink, open_bus
@@ -94,6 +98,9 @@ class _Rig:
         from ppod_sim.device import SimDevice
 
         config = default_device_config().with_can(interface="virtual", channel=f"bench-fb-{next(_channels)}")
+        if plant_model_allowance is not None:  # 0: plate-side limits through the nominal plant alone
+            limits = dataclasses.replace(config.limits, plant_model_allowance=plant_model_allowance)
+            config = dataclasses.replace(config, limits=limits)
         self.buses = [open_bus(config.can), open_bus(config.can)]
         self.device = SimDevice(config, self.buses[0], seed=seed)
         self.link = DeviceLink(self.buses[1], config)
@@ -146,7 +153,8 @@ class _Rig:
                 if res is None or res.step is None:
                     continue
                 yield res
-                self.gen.apply_correction(goal.key, res.step.k, res.step.correction_a)
+                self.gen.apply_correction(goal.key, res.step.k, res.step.correction_a,
+                                          measured_accel=res.measured_accel, measured_seq=res.table_seq)
                 if until(res):
                     self.summaries.clear()
                     return
@@ -193,15 +201,16 @@ def run_latency(goal, seed: int, latency_s: float, iterations: int = 6, tables: 
                 summaries.append((max(now + lag, held_until[0]), s))
             rig.summaries.clear()
             while corrections and corrections[0][0] <= now:
-                step = corrections.popleft()[1]
-                rig.gen.apply_correction(goal.key, step.k, step.correction_a)
+                res = corrections.popleft()[1]
+                rig.gen.apply_correction(goal.key, res.step.k, res.step.correction_a,
+                                         measured_accel=res.measured_accel, measured_seq=res.table_seq)
             while summaries and summaries[0][0] <= now:
                 s = summaries.popleft()[1]
                 res = rig.loop.on_summary(s.k, s.phasors, goal.frequency_hz, s.samples_per_cycle, now,
                                           s.table_seq if tables else None, s.first_cycle if tables else None)
                 if res is not None and res.step is not None:
                     steps.append((res.step.iteration, res.step.error_relative, s.table_seq))
-                    corrections.append((now + latency_s, res.step))
+                    corrections.append((now + latency_s, res))
     finally:
         rig.close()
     return steps
@@ -268,8 +277,9 @@ def run_switching(seed: int, goals: int = 12, dwell_s: float = 1.5, status_laten
             rows[current["index"]] = {
                 "first": rig.true_error(goal)[0], "source": rig.loop.initial_source or "none",
                 "first_fundamental": float(np.linalg.norm((truth[0] - g) * rig.scale) / np.linalg.norm(g * rig.scale))}
-        step = res.step
-        later(latency_s, lambda: rig.gen.apply_correction(None, step.k, step.correction_a))
+        step, accel, seq = res.step, res.measured_accel, res.table_seq
+        later(latency_s, lambda: rig.gen.apply_correction(None, step.k, step.correction_a, measured_accel=accel,
+                                                          measured_seq=seq))
 
     goals_list = switching_goals(goals, seed)
     try:
@@ -619,7 +629,7 @@ def _calibration_section(args: argparse.Namespace, out: Path) -> dict:
     """
     from ppod_ros.device import default_device_config
     from ppod_ros.estimation.calibration import equivalent_calibration
-    from ppod_sim.sensors import SensorErrors
+    from ppod_sim.sensors import DEFAULT_BENDING, SensorErrors
 
     config = default_device_config()
     cal = simulated_calibration()
@@ -643,13 +653,16 @@ def _calibration_section(args: argparse.Namespace, out: Path) -> dict:
         print(f"{n:10s} {truth.gain[i]:10.4f} {cal.gain[i]:8.4f} {100 * gerr[i]:8.2f}% {aerr[i]:7.2f} deg   "
               f"{100 * raw_g[i]:8.2f}% {raw_a[i]:7.2f} deg")
     print(f"max gain error {100 * gerr.max():.2f} % (tangential {100 * gerr[0::2].max():.2f} %, vertical "
-          f"{100 * gerr[1::2].max():.2f} %: the plate's bending), max axis error {aerr.max():.2f} deg")
+          f"{100 * gerr[1::2].max():.2f} %), max axis error {aerr.max():.2f} deg")
+    print(f"plate bending fitted (saddle of the vertical channels per unit p''z): cos 2theta "
+          f"{100 * cal.bending[0]:+.2f} %, sin 2theta {100 * cal.bending[1]:+.2f} % (simulated: cos 2theta "
+          f"{100 * DEFAULT_BENDING:.2f} % of the true readings)")
     print("unobservable (fixed by convention):")
     for u in cal.unobservable:
         print(f"  {u}")
     return {"gain_error_max": float(gerr.max()), "gain_error_max_tangential": float(gerr[0::2].max()),
             "axis_error_max_deg": float(aerr.max()), "convention_vs_raw_axis_max_deg": float(raw_a.max()),
-            "convention_vs_raw_gain_max": float(raw_g.max())}
+            "convention_vs_raw_gain_max": float(raw_g.max()), "bending": [float(v) for v in cal.bending]}
 
 
 REAL_DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "ppod2_real_subset.json"

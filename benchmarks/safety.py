@@ -37,6 +37,8 @@ GRAVITY = 9.81  # m/s^2, as docs/device.md's contact margin
 #: Relative tolerance of the independent check: the two models agree to ~1e-9, the protocol quantises
 #: currents to 2^-19 A (1e-6 of a typical entry).
 CHECK_RTOL = 1e-5
+#: The limits that belong to the plate's own motion (docs/device.md, "Planning and limits").
+PLATE_SIDE = ("limits.plate_accel_mps2", "limits.plate_angular_accel_radps2", "limits.contact_margin_mps2")
 #: Samples per period of the highest row in the independent check (the issue asks for >= 1024).
 CHECK_SAMPLES = 1024
 
@@ -245,6 +247,12 @@ def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None
     counts: Counter = Counter()
     over: Counter = Counter()
     worst: dict[str, float] = {}
+    # Tables made from a correction judged on a (random, often wrong) measured plate: their plate-side
+    # limits may exceed the nominal plant's by limits.plant_model_allowance at most (docs/device.md).
+    measured_tables: set[bytes] = set()
+    worst_measured: dict[str, float] = {}
+    allowance = config.limits.plant_model_allowance
+    playing: list[int | None] = [None]
     exceptions: list[str] = []
     seen_acks = 0
 
@@ -276,13 +284,16 @@ def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None
         ratios, forbidden = checker.check(table.frequency_hz, dense)
         if forbidden:
             counts["accepted with current at a forbidden frequency"] += 1
-        for name, r in ratios.items():
-            worst[name] = max(worst.get(name, 0.0), r)
-            if r > 1.0 + CHECK_RTOL:
-                over[name] += 1
-        if any(r > 1.0 + CHECK_RTOL for r in ratios.values()):
-            counts["over-limit tables"] += 1
         want = intended.get(seq)
+        measured = want is not None and want[0].tobytes() in measured_tables
+        bound = {name: 1.0 + (allowance if measured and name in PLATE_SIDE else 0.0) for name in ratios}
+        uses = worst_measured if measured else worst
+        for name, r in ratios.items():
+            uses[name] = max(uses.get(name, 0.0), r)
+            if r > bound[name] + CHECK_RTOL:
+                over[name] += 1
+        if any(r > bound[name] + CHECK_RTOL for name, r in ratios.items()):
+            counts["over-limit tables"] += 1
         if want is not None:
             K = max(want[0].shape[0], dense.shape[0])
             a, b = np.zeros((K, 6), complex), np.zeros((K, 6), complex)
@@ -326,6 +337,8 @@ def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None
         out = guarded("submit", gen.submit, goal, dry_run=bool(rng.random() < 0.05))
         if out is not None:
             counts["goals accepted" if out.accepted else "goals rejected"] += 1
+            if out.accepted and out.seq is not None:
+                playing[0] = out.seq
         pump(float(rng.uniform(0.03, 0.1)))
         plan = gen.active_plan
         for _ in range(int(rng.integers(0, 4))):
@@ -334,10 +347,23 @@ def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None
             K = plan.currents_a.shape[0]
             ks = np.sort(rng.choice(np.arange(1, K + 1), size=int(rng.integers(1, K + 1)), replace=False))
             corr = (rng.normal(size=(ks.size, 6)) + 1j * rng.normal(size=(ks.size, 6))) * rng.uniform(0.01, 1.5)
+            claim, claim_seq = None, None
+            applied = gen.applied_correction_a
+            if rng.random() < 0.5 and playing[0] is not None and applied is not None:
+                # A measured plate, mostly wrong: the nominal prediction of the table playing scaled
+                # by 0.2-1.5 plus noise, sometimes of another table (stale).
+                claim = gen.planner.plant.predict(plan.frequency_hz, plan.currents_a + applied, "accel")
+                claim = claim * rng.uniform(0.2, 1.5) + rng.normal(size=claim.shape) * rng.uniform(0.0, 2.0)
+                claim_seq = playing[0] if rng.random() < 0.8 else playing[0] % 255 + 1
             res = guarded("correction", gen.apply_correction, None, ks, corr, absolute=bool(rng.random() < 0.7),
-                          start=bool(rng.random() < 0.2))
+                          start=bool(rng.random() < 0.2), measured_accel=claim, measured_seq=claim_seq)
             counts["corrections"] += 1
             if res is not None and res.applied:
+                playing[0] = res.seq
+                if res.result.measured_ratios is not None:
+                    counts["corrections judged on a measured plate"] += 1
+                    if res.seq in intended:
+                        measured_tables.add(intended[res.seq][0].tobytes())
                 counts["corrections applied"] += 1
                 if res.result.limited_by:
                     counts["corrections scaled back by the envelope"] += 1
@@ -351,7 +377,8 @@ def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None
         1 for e in link.fault_events if e.faults & 0x3C)
     for b in (host_bus, dev_bus, spy):
         b.shutdown()
-    return {"counts": counts, "over": over, "worst": worst, "exceptions": exceptions,
+    return {"counts": counts, "over": over, "worst": worst, "worst_measured": worst_measured,
+            "allowance": allowance, "exceptions": exceptions,
             "device_time_s": device.time_s, "frames_mangled": dict(host_bus.stats)}
 
 
@@ -463,6 +490,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'over-limit tables (independent check, rtol 1e-5)':58s} {c.get('over-limit tables', 0):8d}")
     for name, ratio in sorted(res["worst"].items()):
         print(f"  {name:56s} worst use {ratio:6.4f}  over: {res['over'].get(name, 0)}")
+    if res["worst_measured"]:
+        print(f"tables corrected on a measured plate (plate-side limits bounded by 1 + plant_model_allowance "
+              f"= {1 + res['allowance']:g} on the nominal plant, the others by 1):")
+        for name, ratio in sorted(res["worst_measured"].items()):
+            print(f"  {name:56s} worst use {ratio:6.4f}")
     print(f"frames mangled by the fault injection: {res['frames_mangled']}")
     for text in res["exceptions"]:
         print("EXCEPTION", text)

@@ -266,7 +266,7 @@ class AccelFeedbackNode(PpodLifecycleNode):
             self.diagnostics.set("learning", diag.ERROR, f"diverged: {step.message}")
             self._request_stop(f"learning control diverged ({step.message})")
             return
-        self._send_correction(goal.name, step.k, step.correction_a, step.iteration)
+        self._send_correction(goal.name, step.k, step.correction_a, step.iteration, out.table_seq, out.measured_accel)
         self.get_logger().info(f"'{goal.name}' iteration {step.iteration}: error {100 * step.error_relative:.2f} % "
                                f"measured on device table {out.table_seq}")
         level = diag.OK if step.state in ("converged", "running") else diag.WARN
@@ -274,12 +274,17 @@ class AccelFeedbackNode(PpodLifecycleNode):
                              iteration=step.iteration, error_relative=step.error_relative,
                              out_of_goal_relative=step.out_of_goal_relative, stored=out.stored)
 
-    def _send_correction(self, goal_name: str, k: np.ndarray, table: np.ndarray, iteration: int) -> None:
+    def _send_correction(self, goal_name: str, k: np.ndarray, table: np.ndarray, iteration: int,
+                         table_seq: int | None = None, measured: np.ndarray | None = None) -> None:
         msg = HarmonicCorrection(goal_name=goal_name, iteration=int(iteration), absolute=True)
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.k = [int(v) for v in k]
         msg.real_a = np.asarray(table).real.reshape(-1).tolist()
         msg.imag_a = np.asarray(table).imag.reshape(-1).tolist()
+        if table_seq is not None and measured is not None:  # the measurement the step was taken on
+            msg.measured_table_seq = int(table_seq)
+            msg.measured_real = measured.real.reshape(-1).tolist()
+            msg.measured_imag = measured.imag.reshape(-1).tolist()
         self.corr_pub.publish(msg)
 
     def _request_stop(self, why: str) -> None:

@@ -203,13 +203,19 @@ class WaveformGeneratorNode(PpodLifecycleNode):
             return  # a correction for another (or a finished) goal is never applied
         k = np.asarray(msg.k, dtype=int)
         table = (np.asarray(msg.real_a) + 1j * np.asarray(msg.imag_a)).reshape(-1, 6) if k.size else np.zeros((0, 6))
+        measured = None
+        if msg.measured_table_seq and len(msg.measured_real) and len(msg.measured_real) % 6 == 0 \
+                and len(msg.measured_imag) == len(msg.measured_real):
+            measured = (np.asarray(msg.measured_real) + 1j * np.asarray(msg.measured_imag)).reshape(-1, 6)
         # Iteration 0 is the goal's starting correction (stored or predicted by the learned plant).
-        out = self.gen.apply_correction(None, k, table, absolute=msg.absolute, start=msg.iteration == 0)
+        out = self.gen.apply_correction(None, k, table, absolute=msg.absolute, start=msg.iteration == 0,
+                                        measured_accel=measured, measured_seq=int(msg.measured_table_seq) or None)
         level = diag.OK if out.applied and not out.reason else diag.WARN
         extra = {}
         if out.result is not None:
             extra = {"scale": out.result.scale, "limited_by": out.result.limited_by or "",
-                     "blocked_rows": list(out.result.blocked_rows)}
+                     "blocked_rows": list(out.result.blocked_rows),
+                     "plate_limits_on": "measured plate" if out.result.measured_ratios is not None else "nominal plant"}
         self.diagnostics.set("correction", level, out.reason or "applied", iteration=msg.iteration,
                              applied=out.applied, **extra)
 

@@ -145,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
     for name, v in cal.report.items():
         c = "n/a" if not math.isfinite(v["calibrated"]) else f"{100 * v['calibrated']:.2f} %"
         print(f"{name:28s} {100 * v['nominal']:7.2f} % {c:>11s}")
+    print(f"\nplate bending (saddle read by the vertical channels, per unit p''z): cos 2theta "
+          f"{100 * cal.bending[0]:+.2f} %, sin 2theta {100 * cal.bending[1]:+.2f} %")
     print("\nunobservable (fixed by convention):")
     for u in cal.unobservable:
         print(f"  - {u}")

@@ -66,6 +66,15 @@ LIMIT_ORDER = (
     "limits.amplifier_voltage_v",
 )
 
+#: The limits that are properties of the plate's own motion (the others belong to the actuators and
+#: legs): a corrected table's plate-side limits may be judged on the measured plate motion
+#: (:mod:`ppod_ros.actuation.corrections`).
+PLATE_LIMITS = (
+    "limits.plate_accel_mps2",
+    "limits.plate_angular_accel_radps2",
+    "limits.contact_margin_mps2",
+)
+
 _UNITS = {
     "limits.frequency_range_hz": "Hz",
     "limits.excluded_bands_hz": "Hz",
@@ -347,6 +356,19 @@ class Envelope:
         forbidden = tuple(kk for kk, _, _ in self.forbidden(f, active.k))
         return EnvelopeReport(f, values, ratios, self._limits(), forbidden, worst)
 
+    def check_plate(self, frequency_hz: float, accel: np.ndarray) -> tuple[dict[str, float], dict[str, float]]:
+        """(values, ratios) of the :data:`PLATE_LIMITS` of a plate motion given by its acceleration
+        phasors ``accel`` (K, 6) (rows harmonics 1..K; m/s^2 and rad/s^2), e.g. a measured one."""
+        X = np.asarray(accel, dtype=complex)
+        if X.ndim != 2 or X.shape[1] != 6 or not np.all(np.isfinite(X)):
+            raise ConfigError(f"accel: expected a finite (K, 6) table of plate acceleration phasors, got {X.shape}")
+        values: dict[str, float] = {}
+        ratios: dict[str, float] = {}
+        k = np.arange(1, X.shape[0] + 1)
+        acc, ang, margin = motion_extremes(X, k, self.config.limits.working_radius_m)
+        self._motion_values(acc, ang, margin, values, ratios)
+        return values, ratios
+
     # ------------------------------------------------------------------ pieces
     def _limits(self) -> dict[str, float]:
         lim = self.config.limits
@@ -417,6 +439,7 @@ class Envelope:
 
 __all__ = [
     "LIMIT_ORDER",
+    "PLATE_LIMITS",
     "Envelope",
     "EnvelopeReport",
     "motion_extremes",

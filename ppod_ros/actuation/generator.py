@@ -31,7 +31,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from ppod_ros.actuation.corrections import CorrectionResult
+from ppod_ros.actuation.corrections import CorrectionResult, MeasuredTable
 from ppod_ros.actuation.planning import GoalPlan, GoalPlanner
 from ppod_ros.can.codec import TableAck
 from ppod_ros.can.host import DeviceLink
@@ -182,7 +182,8 @@ class WaveformGenerator:
 
     # ------------------------------------------------------------------ corrections
     def apply_correction(self, goal_key: bytes | None, k: np.ndarray, table_a: np.ndarray,
-                         absolute: bool = True, start: bool = False) -> CorrectionOutcome:
+                         absolute: bool = True, start: bool = False, measured_accel: np.ndarray | None = None,
+                         measured_seq: int | None = None) -> CorrectionOutcome:
         """Apply a correction (harmonics ``k``, (len(k), 6) complex amperes) to the active goal.
 
         ``goal_key`` (a ``PlateMotion.key``) must name the active goal (None: whatever is active), so a
@@ -192,6 +193,12 @@ class WaveformGenerator:
         correction its entries may reach ``limits.start_correction_a`` instead of one learning step
         (``limits.correction_step_a``), and it is crossfaded over the goal's own ramp. Every current,
         voltage and thermal limit applies as always.
+
+        ``measured_accel`` (Km, 6) is the plate's acceleration (phasors of harmonics 1..Km) measured
+        on the device table ``measured_seq`` (``AccelSummary.table_seq``). When that table is the
+        newest one sent for the goal, the one playing, the corrected table's plate-side limits are
+        judged on this measurement (:class:`~ppod_ros.actuation.corrections.MeasuredTable`);
+        otherwise (none, stale, or a starting correction) through the nominal plant.
         """
         with self._lock:
             act = self._active
@@ -210,8 +217,12 @@ class WaveformGenerator:
             cap = self.config.limits.start_correction_a if first else None
             if not np.all(np.isfinite(table)):
                 return CorrectionOutcome(False, "correction must be finite")
+            measured = None
+            if measured_accel is not None and not first and measured_seq is not None and measured_seq == act.last_seq:
+                measured = MeasuredTable(act.correction_a.copy(), np.asarray(measured_accel, dtype=complex))
             try:
-                result = self.planner.correct(act.plan, target, previous=act.correction_a, k=k, step_cap_a=cap)
+                result = self.planner.correct(act.plan, target, previous=act.correction_a, k=k, step_cap_a=cap,
+                                              measured=measured)
             except (ConfigError, LimitError) as exc:
                 return CorrectionOutcome(False, str(exc))
             ramp = max(act.plan.ramp_s, self.config.timing.min_ramp_s) if first else self.config.timing.min_ramp_s

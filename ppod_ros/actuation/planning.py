@@ -38,7 +38,7 @@ from ppod_ros.kinematics.stewart import LegTrajectory, leg_trajectory
 from ppod_ros.motion import GRAVITY_MPS2, PlateMotion
 
 if TYPE_CHECKING:
-    from ppod_ros.actuation.corrections import CorrectionResult
+    from ppod_ros.actuation.corrections import CorrectionResult, MeasuredTable
 
 #: The table always has room for harmonics 1..3 (DESIGN.md), so that feedback can cancel distortion.
 MIN_TABLE_HARMONICS = 3
@@ -399,12 +399,13 @@ class GoalPlanner:
         previous: np.ndarray | None = None,
         k: np.ndarray | None = None,
         step_cap_a: float | None = None,
+        measured: MeasuredTable | None = None,
     ) -> CorrectionResult:
         """Apply a feedback correction to a plan's table (see ppod_ros.actuation.corrections)."""
         # Imported here: the corrections module builds on this one.
         from ppod_ros.actuation.corrections import correct_table
 
-        return correct_table(self, plan, requested, previous, k, step_cap_a)
+        return correct_table(self, plan, requested, previous, k, step_cap_a, measured)
 
 
 __all__ = [

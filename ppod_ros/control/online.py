@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from ppod_ros.actuation.corrections import MeasuredTable
 from ppod_ros.actuation.planning import GoalPlan, GoalPlanner
 from ppod_ros.config.fields import Fields
 from ppod_ros.control.learned_plant import PlantLearner, PlantLearningSettings
@@ -107,6 +108,9 @@ class LoopOutput:
     channel_change: ChannelSetChange | None = None
     #: The device table the estimate's summaries were computed on (None when not known).
     table_seq: int | None = None
+    #: The measured plate acceleration (Km, 6) to send with the step's correction, with ``table_seq``
+    #: (``WaveformGenerator.apply_correction``'s ``measured_accel``); None when the table is not known.
+    measured_accel: np.ndarray | None = None
 
 
 @dataclass
@@ -181,6 +185,9 @@ class FeedbackLoop:
         self._table_cycle: int | None = None  # the device cycle it first showed in
         self._resume_cycle: int | None = None  # the device cycle from which it has settled
         self._ramp_s = 0.0  # the goal's ramp, while its own and its starting tables ramp in
+        # The measurement a control step is taken on, while it is taken (the generator judges the
+        # plate-side limits of the corrected table on it, and so does the loop's copy of its limits).
+        self._measured: MeasuredTable | None = None
 
     def _make_estimator(self) -> AccelEstimator:
         """The estimator: the calibration's allowance, else the learned one once ready, else the default."""
@@ -238,7 +245,8 @@ class FeedbackLoop:
     def _as_generator(self, plan: GoalPlan, own: DeviceLimits, step_cap_a: float | None = None) -> LimitFunction:
         """The controller's limits: its own, then exactly what the generator will do with the result.
 
-        The generator holds every corrected table to the device envelope (through the nominal plant)
+        The generator holds every corrected table to the device envelope (the plate-side limits on
+        the measurement the step is taken on, when the table it was measured on is known)
         and scales a step back when it would not fit (:mod:`ppod_ros.actuation.corrections`). The
         same function on the same plan gives the loop the correction the plate will really play, so
         the controller continues from it and the plant learner pairs each measurement with the
@@ -248,7 +256,8 @@ class FeedbackLoop:
         def limit(previous: np.ndarray, proposed: np.ndarray, feedforward: np.ndarray):
             correction, report = own.apply(previous, proposed, feedforward)
             try:
-                result = self.planner.correct(plan, correction, previous=previous, step_cap_a=step_cap_a)
+                result = self.planner.correct(plan, correction, previous=previous, step_cap_a=step_cap_a,
+                                          measured=self._measured)
             except (ConfigError, LimitError) as exc:
                 event = LimitEvent(f"generator: {exc}", -1, 0.0, 1.0)
                 return previous.copy(), LimitReport(report.events + (event,))
@@ -339,7 +348,15 @@ class FeedbackLoop:
             km = int(estimate.k.max())
             self.learner.observe(self.goal.frequency_hz, self.goal.phasor_table(km), ctrl.k, ctrl.command_a,
                                  estimate.table(km))
-            out.step = ctrl.update(estimate)
+            # Measured on a known device table (the one the last correction made): the generator
+            # is sent the measurement too and judges the plate-side limits on it.
+            if table_seq is not None:
+                self._measured = MeasuredTable(ctrl.correction_a.copy(), estimate.table(km))
+            try:
+                out.step = ctrl.update(estimate)
+            finally:
+                self._measured = None
+            out.measured_accel = None if table_seq is None else estimate.table(km)
             if out.step.converged and self.store is not None:
                 self.store.save(self.config.name, self.goal, out.step.k, self.controller.correction_a)
                 out.stored = True

@@ -163,6 +163,7 @@ def _limits(f: Fields, plate_radius_m: float, ambient_c: float) -> Limits:
         correction_step_a=_positive(f, "correction_step_a", "A"),
         start_correction_a=f.number("start_correction_a", 1.0, min_value=0.0, exclusive_min=True, unit="A"),
         max_table_harmonic=f.integer("max_table_harmonic", MAX_HARMONIC, min_value=1, max_value=MAX_HARMONIC),
+        plant_model_allowance=f.number("plant_model_allowance", 0.25, min_value=0.0, max_value=1.0, unit="1"),
     )
     if out.max_table_harmonic < out.max_harmonic:
         raise ConfigError(f"{f.key_path('max_table_harmonic')}: must be >= max_harmonic ({out.max_harmonic}), "

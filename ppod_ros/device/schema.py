@@ -94,7 +94,10 @@ class Limits:
     the distortion products the feedback cancels); ``correction_step_a`` bounds one feedback
     correction step per table entry;
     ``start_correction_a`` bounds a goal's starting correction per table entry (the one the feedback
-    sends as the goal ramps in: learned for this goal before, or predicted by the learned plant).
+    sends as the goal ramps in: learned for this goal before, or predicted by the learned plant);
+    ``plant_model_allowance`` (fraction) is how far the nominal plant's prediction of a corrected
+    table's plate-side limits may exceed them when the table is judged on the measured plate motion
+    (docs/device.md, "Planning and limits"; 0: judged through the nominal plant alone).
     """
 
     leg_stroke_m: float
@@ -111,6 +114,7 @@ class Limits:
     correction_step_a: float
     start_correction_a: float = 1.0
     max_table_harmonic: int = 10
+    plant_model_allowance: float = 0.25
 
 
 @dataclass(frozen=True)

@@ -77,12 +77,14 @@ class AccelEstimator:
         self.calibration = calibration
         self._gain = np.ones(layout.num_channels)
         allowance = None
+        bending = None
         if calibration is not None:
             if not isinstance(calibration, AccelCalibration):
                 raise ConfigError(f"calibration: expected an AccelCalibration, got {type(calibration).__name__}")
             layout = calibration.layout(layout)
             self._gain = np.asarray(calibration.gain, float)
             allowance = calibration.misfit_allowance()
+            bending = calibration.bending_weights()
         if misfit_allowance is not None:
             allowance = misfit_allowance
         self.layout = layout
@@ -93,7 +95,7 @@ class AccelEstimator:
         self.tolerance = float(tolerance)
         self.health = health or HealthSettings()
         self._solver = SixDofSolver(
-            layout, self.terms, self.gravity_mps2, self.health, max_iterations, self.tolerance, allowance
+            layout, self.terms, self.gravity_mps2, self.health, max_iterations, self.tolerance, allowance, bending
         )
 
     # ------------------------------------------------------------------ entry points

@@ -147,8 +147,11 @@ class SixDofSolver:
         max_iterations: int,
         tolerance: float,
         misfit_allowance: np.ndarray | None = None,
+        bending: np.ndarray | None = None,
     ):
         self.layout = layout
+        # Each channel's reading per unit p''z of the plate's bending (C,) (a calibration's), else none.
+        self.bending = None if bending is None or not np.any(bending) else np.asarray(bending, float)
         # Relative misfit each layout channel may show against the others' prediction (C,): the
         # device's own, from its calibration, else the settings' default for every channel.
         allow = np.full(layout.num_channels, health.misfit_allowance)
@@ -184,6 +187,8 @@ class SixDofSolver:
         H = np.stack(
             [self.layout.measurement_matrix(omega * k, self.gravity_mps2)[idx] for k in ks]
         )  # (K, C, 6)
+        if self.bending is not None:
+            H[..., 2] += self.bending[idx][None]
         pos, ax = self.layout.position_m[idx], self.layout.axis[idx]
         thr = self.health.residual_threshold
         allow = self.allowance[idx]

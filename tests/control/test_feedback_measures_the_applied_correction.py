@@ -36,13 +36,14 @@ def test_without_table_numbers_the_loop_measures_the_table_before_its_correction
 
 
 def test_the_controller_and_the_plant_learner_continue_from_what_the_generator_applies():
-    # On this device (seed 2) the generator scales LineSinkX's corrections back to the envelope (the
-    # contact margin, judged through the nominal plant). The loop limits each step exactly as the
-    # generator will, so its correction, and the currents the plant learner pairs with each
-    # measurement, are the ones the plate plays, and the scaling is reported in the step.
+    # On this device (seed 2), judged through the nominal plant alone (plant_model_allowance 0, the
+    # behaviour before the measured plate was used), the generator scales LineSinkX's corrections
+    # back to the envelope (the contact margin). The loop limits each step exactly as the generator
+    # will, so its correction, and the currents the plant learner pairs with each measurement, are
+    # the ones the plate plays, and the scaling is reported in the step.
     from ppod_bench.feedback import _Rig
 
-    rig = _Rig(2)
+    rig = _Rig(2, plant_model_allowance=0.0)
     try:
         assert rig.gen.submit(LINESINKX).accepted
         rig.advance(0.9)
@@ -51,6 +52,27 @@ def test_the_controller_and_the_plant_learner_continue_from_what_the_generator_a
         np.testing.assert_allclose(rig.loop.controller.correction_a, rig.gen.applied_correction_a, atol=1e-9)
         assert any(e.actuator < 0 and "envelope" in e.limit for s in steps for e in s.limits.events), \
             [s.limits.describe() for s in steps]
+    finally:
+        rig.close()
+
+
+def test_judged_on_the_measured_plate_the_same_goal_converges_and_loop_and_generator_agree():
+    # The same device and goal with the default plant_model_allowance: the generator judges the
+    # contact margin on the plate the loop measured (sent with each correction), the loop's copy of
+    # the limits does the same, and the goal is reached instead of stalling at the margin.
+    from ppod_bench.feedback import _Rig
+
+    rig = _Rig(2)
+    try:
+        assert rig.gen.submit(LINESINKX).accepted
+        rig.advance(0.9)
+        rig.start(LINESINKX)
+        results = list(rig.iterate(LINESINKX, lambda r: r.step.converged or r.step.iteration >= 6))
+        np.testing.assert_allclose(rig.loop.controller.correction_a, rig.gen.applied_correction_a, atol=1e-9)
+        assert all(r.measured_accel is not None and r.table_seq is not None for r in results)
+        assert results[-1].step.converged and results[-1].step.iteration <= 5, \
+            [(r.step.iteration, r.step.error_relative) for r in results]
+        assert rig.true_error(LINESINKX)[0] < 0.015
     finally:
         rig.close()
 

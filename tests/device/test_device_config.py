@@ -77,6 +77,8 @@ def test_with_mismatch_zero_returns_an_exact_plant_config():
         (("limits", "max_harmonic"), 11, "limits.max_harmonic: must be <= 10"),
         (("limits", "max_table_harmonic"), 4, "limits.max_table_harmonic: must be >= max_harmonic"),
         (("limits", "start_correction_a"), 0.0, "limits.start_correction_a: must be > 0"),
+        (("limits", "plant_model_allowance"), -0.1, "limits.plant_model_allowance: must be >= 0"),
+        (("limits", "plant_model_allowance"), 1.5, "limits.plant_model_allowance: must be <= 1"),
         (("sim", "mismatch", "gain"), 2.0, "sim.mismatch.gain: must be <= 0.9"),
         (("limits", "frequency_range_hz"), [5.0, 600.0], "would exceed their configured rate"),
     ],

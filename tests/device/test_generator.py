@@ -274,3 +274,19 @@ def test_a_lost_older_correction_is_never_resent_over_a_newer_one(faulty_rig):
     np.testing.assert_allclose(played.currents, sent[:rows], atol=1e-9)
     assert not np.any(sent[rows:])
     np.testing.assert_allclose(gen.applied_correction_a, newer.result.applied_a)
+
+
+def test_a_correction_is_judged_on_the_measured_plate_only_when_measured_on_the_table_playing(rig):
+    _, device, link, gen, _ = rig
+    out = gen.submit(LINESINKX)
+    run(device, link, 0.3)
+    k = np.array([1])
+    small = np.full((1, 6), 0.01 + 0j)
+    measured = device.last_truth().accel
+    stale = gen.apply_correction(None, k, small, measured_accel=measured, measured_seq=(out.seq % 255) + 7)
+    assert stale.applied and stale.result.measured_ratios is None  # not the table playing: nominal plant
+    playing = stale.seq
+    fresh = gen.apply_correction(None, k, 2 * small, measured_accel=measured, measured_seq=playing)
+    assert fresh.applied and fresh.result.measured_ratios is not None
+    assert set(fresh.result.measured_ratios) == {"limits.plate_accel_mps2", "limits.plate_angular_accel_radps2",
+                                                 "limits.contact_margin_mps2"}

@@ -25,6 +25,9 @@ def test_a_short_campaign_with_faults_finds_no_unsafe_table_and_no_exception():
     assert c.get("accepted with current at a forbidden frequency", 0) == 0
     assert c.get("accepted tables that differ from what was sent", 0) == 0
     assert c.get("exceptions", 0) == 0, res["exceptions"]
+    # Corrections judged on a (random, mostly wrong) measured plate were sent too, and stayed within
+    # the plate-side limits plus limits.plant_model_allowance on the independent nominal plant.
+    assert c.get("corrections judged on a measured plate", 0) > 0, c
 
 
 def test_no_single_bit_flip_of_any_frame_of_a_table_is_accepted_as_another_table():

@@ -487,9 +487,9 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
             P[RP_ZTOL] = max(zero_tol, 100.0 * sc[3])
         else:
             point_speed_limits(P, sc[2], T)
-        # Starting guess: the caller's, else the neighbour's limit cycle (extrapolated linearly
-        # from the two before when the configurations are evenly spaced, as along a grid row),
-        # else rest.
+        # Starting guess: the caller's, else the neighbour's limit cycle (extrapolated by the
+        # polynomial through the last converged neighbours while they and this configuration are
+        # evenly spaced, as along a grid row: two points, in long chunks up to four), else rest.
         # (Point parts only: a rigid part's limit cycle can change quickly near unstable lines.)
         have_warm = nhist > 0
         npts = 1 if have_warm else 0
@@ -504,9 +504,10 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
                 x0[j] = 0.0
                 for k in range(npts):
                     x0[j] += EXTRAP_WEIGHTS[npts - 1, k] * hist[k, j]
-        # The rate prior only comes with a warm start from an earlier call (solve_fields): a prior
-        # from the neighbour would make the number of periods, hence the result within the
-        # tolerance, jump as the motion changes slightly (finite-difference design Jacobians).
+        # The rate prior comes with a warm start from an earlier call (solve_fields), and from the
+        # neighbour only in long chunks (large grids): in small calls it would make the number of
+        # periods, hence the result within the tolerance, jump as the motion changes slightly
+        # (finite-difference design Jacobians).
         if kind == 0 and has_x0[i]:
             prior[0] = R0[i]
         elif long and kind == 0 and have_warm and last_ok == i - 1 and S[S_WARM] > 0.0:

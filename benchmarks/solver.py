@@ -548,7 +548,8 @@ def _run_stalls(args, out: Path) -> int:
           f"load average before: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}", flush=True)
     rows = measure(args.stall_calls, args.busy)
     text = _table("per-call latency of small calls" + (" with the other core busy" if args.busy else ""),
-                  ["case", "threads", "calls", "p50 ms", "p90 ms", "max ms"], rows)
+                  ["case", "threads", "calls", "p50 ms", "p90 ms", "max ms", "thread CPU p50 ms", "periods/config"],
+                  rows)
     (out / "solver_stalls.txt").write_text(text + "\n", encoding="utf-8")
     return 0
 

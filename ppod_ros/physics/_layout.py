@@ -83,4 +83,5 @@ S_SKIP_STICK = 16   # 1: skip sticking logic where sticking is provably impossib
 S_CHUNK = 17        # configurations per parallel work item
 S_STARTS = 18       # rigid: number of initial twists compared
 S_MIN_STEPS = 19    # steps per period and harmonic at least (events hide in longer steps)
-S_SIZE = 20
+S_LONG = 20         # 1: long chunks (>= CHUNK_LARGE): cubic extrapolation, the neighbour's rate prior
+S_SIZE = 21

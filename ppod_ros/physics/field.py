@@ -32,7 +32,7 @@ from ppod_ros.physics._params import check_configs, check_part, ensure_compiled,
 from ppod_ros.physics._rk import INTEGRATORS
 from ppod_ros.physics._solve import solve_motions, solve_motions_serial
 from ppod_ros.physics.plate import TABLE_COLS, motion_table, table_kmax
-from ppod_ros.physics.settings import REASONS, SolverSettings
+from ppod_ros.physics.settings import CHUNK_LARGE, REASONS, SolverSettings
 
 
 @dataclass(frozen=True, eq=False)
@@ -468,6 +468,11 @@ def _run(motions, part, cfg, X0, R0, has, settings, progress):
     tab = INTEGRATORS[settings.integrator]
     kind = 0 if isinstance(part, PointPart) else 1
     S = settings.vector(part.kind)
+    chunk = settings.chunk_for(n)
+    S[lay.S_CHUNK] = chunk
+    # Long chunks (large grids) extrapolate further and take the neighbour's rate as a prior; small
+    # calls (designs' finite differences, the planner) keep the short, prior-free warm starts.
+    S[lay.S_LONG] = float(chunk >= CHUNK_LARGE)
     flat = cfg.reshape(M * n, dim)
     P = point_rows(part, flat) if kind == 0 else rigid_rows(part, flat, settings.friction_eps_mps)
     P = np.ascontiguousarray(P.reshape(M, n, P.shape[1]))
@@ -489,7 +494,7 @@ def _run(motions, part, cfg, X0, R0, has, settings, progress):
                    out_x, out_s, out_p, out_f, out_r)
         else:
             # ~20 slices aligned to the chunks (same results as one call), each contiguous.
-            step = max(settings.chunk, -(-n // 20 // settings.chunk) * settings.chunk)
+            step = max(chunk, -(-n // 20 // chunk) * chunk)
             for a in range(0, n, step):
                 b = min(n, a + step)
                 outs = [np.ascontiguousarray(o[:, a:b]) for o in (out_v, out_x, out_s, out_p, out_f, out_r)]

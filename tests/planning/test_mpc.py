@@ -162,6 +162,29 @@ def test_the_spin_turns_a_rigid_part_in_place_both_ways_and_faster_than_the_rota
     assert template_motion("spin", no_angle, no_angle.goals[0], poses[0]) == []
 
 
+def test_the_strong_templates_are_not_tried_for_a_part_close_to_its_goal(monkeypatch):
+    from ppod_ros.planning import mpc
+    from ppod_ros.planning.mpc import STRONG_TEMPLATES, PartStatus
+
+    assert STRONG_TEMPLATES.issubset(TEMPLATES)
+    task = MultiTask([published_rigid_part(), PointPart(0.3)],
+                     [PartGoal(0, 0.0, 0.0, 0.0), PartGoal(1, 0.045, 0.0)])
+    s = task.settings
+    close = PartStatus(0, 0.5 * s.near_m, 0.5 * s.strong_turn_from_rad, False, False, None, 1.0)
+    turned = PartStatus(0, 0.5 * s.near_m, 2.0 * s.strong_turn_from_rad, False, False, None, 1.0)
+    far = PartStatus(1, 2.0 * s.near_m, None, False, False, None, 1.0)
+    assert task._close(close) and not task._close(turned) and not task._close(far)
+    # Planning from there: the bracket near its goal gets no spin or transport, the far washer does.
+    asked = []
+    real = mpc.template_motion
+    monkeypatch.setattr(mpc, "template_motion", lambda kind, planner, goal, pose: asked.append(
+        (kind, goal.index)) or real(kind, planner, goal, pose))
+    poses = np.array([[0.5 * s.near_m, 0.0, 0.5 * s.strong_turn_from_rad], [0.045 - 2.0 * s.near_m, 0.0, 0.0]])
+    task.step(0.0, poses)
+    assert {(k, 0) for k in STRONG_TEMPLATES}.isdisjoint(asked)
+    assert ("transport", 1) in asked and ("sink", 0) in asked
+
+
 def test_envelope_keeps_headroom_under_every_limit():
     from ppod_ros.actuation.planning import contact_margin, plate_peaks
 

@@ -7,16 +7,18 @@ the planned motion are not scaled back. Ratios are linear in amplitude, so one s
 into the envelope; a motion with a row at a forbidden frequency cannot be scaled in.
 
 Headroom alone does not keep corrections from being scaled back. The checker judges a corrected
-table by what the nominal plant predicts it does; the feedback's table for a plant whose actuators
+table's plate-side limits on the plate the feedback measured, but bounds what the nominal plant
+predicts for it by ``1 + limits.plant_model_allowance`` (a wrong measurement cannot command an
+arbitrary plate motion; with the allowance 0, by 1); the feedback's table for a plant whose actuators
 are off by ``G = G0 M`` is ``M^-1 G0^-1 goal``, which the nominal plant reads as the motion
 ``G0 M^-1 G0^-1 goal``. Actuator errors of 15 % leak the large components of a motion (the
 rotation and the horizontal translation of a sink) into its small ones (tilt and heave), so this
 reading can nearly double the contact-margin use of a motion that leaves 15 % headroom: the
 checker then scales every correction back to nothing and the plate keeps its first error (measured
 in the demo: 20-30 %). With a :class:`PlantTolerance`, :func:`fit_envelope` also keeps the plate
-motion limits (peak acceleration, angular acceleration, contact margin) within the headroom for
-that reading under a fixed set of actuator errors drawn within the tolerance, so the corrections a
-plant within it needs pass the checker.
+motion limits (peak acceleration, angular acceleration, contact margin) within the headroom under
+that bound for that reading, under a fixed set of actuator errors drawn within the tolerance, so the
+corrections a plant within it needs pass the checker.
 """
 
 from __future__ import annotations
@@ -127,7 +129,12 @@ def fit_envelope(motion: PlateMotion, device, headroom: float = 0.15, step: floa
     name, worst = report.worst()
     if not math.isfinite(worst):
         raise report.error(max_ratio)  # a row at a forbidden frequency: no amplitude fits
-    robust = 0.0 if tolerance is None else max(corrected_motion_ratios(motion, device, tolerance).values())
+    # The generator judges a corrected table's plate-side limits on the measured plate, and bounds
+    # their nominal reading by 1 + limits.plant_model_allowance (actuation/corrections.py): keep the
+    # reading under that bound with the same headroom.
+    allowance = float(getattr(device.limits, "plant_model_allowance", 0.0))
+    robust = 0.0 if tolerance is None else (max(corrected_motion_ratios(motion, device, tolerance).values())
+                                            / (1.0 + allowance))
     worst = max(worst, robust)
     scale = 1.0 if worst <= max_ratio else max_ratio / worst
     for _ in range(20):

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ppod_ros.actuation.envelope import PLATE_LIMITS
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import PartDynamics
@@ -80,8 +81,10 @@ class ActuatorPlantError:
     the first ``unlearned_goals`` motions, then all but ``learned_residual``), and after
     ``first_estimate_s`` (the ramp, settling and the first estimate) the rest with time constant
     ``decay_s`` (the learning iterations). The generator applies at most the fraction ``s_max`` of
-    the correction for which its checker, reading the table through the nominal plant, keeps every
-    limit (computed per motion by bisection, as the generator scales a correction back).
+    the correction for which its checker keeps every limit (computed per motion by bisection, as the
+    generator scales a correction back): the actuator-side limits through the nominal plant, the
+    plate-side ones on the plate the feedback measures (here the true plate) with the nominal
+    reading within ``limits.plant_model_allowance`` over them.
     """
 
     M: np.ndarray                         # (6, 6) complex actuator error matrix
@@ -139,10 +142,23 @@ class ActuatorPlantError:
             full = np.einsum("ij,kjl,kl->ki", np.linalg.inv(self.M), G0inv, X) - ff
             kmax = int(motion.k.max())
 
+            allowance = float(self.device.limits.plant_model_allowance)
+            P = self.uncorrected(motion).phasors()
+
             def ok(s: float) -> bool:
+                # As the generator judges a corrected table (actuation/corrections.py): every limit
+                # on the nominal plant, except the plate-side ones, which are judged on the measured
+                # plate (here the true one) with the nominal reading bounded by the allowance.
                 table = np.zeros((kmax, 6), complex)
                 table[motion.k - 1] = ff + s * full
-                return self._checker.check_table(motion.frequency_hz, table).within(1.0)
+                ratios = self._checker.check_table(motion.frequency_hz, table).ratios
+                if allowance <= 0:
+                    return all(r <= 1.0 for r in ratios.values())
+                plate = np.zeros((kmax, 6), complex)
+                plate[motion.k - 1] = X + (1.0 - s) * (P - X)
+                true = self._checker.check_plate(motion.frequency_hz, plate)[1]
+                return all(r <= (1.0 + allowance if n in PLATE_LIMITS else 1.0) for n, r in ratios.items()) and all(
+                    r <= 1.0 for r in true.values())
 
             if ok(1.0):
                 s_max = 1.0

@@ -232,14 +232,25 @@ def test_corrections_for_plants_within_the_tolerance_pass_the_checker():
                              for n in ("limits.contact_margin_mps2", "limits.plate_accel_mps2",
                                        "limits.plate_angular_accel_radps2")) for G in plants])
 
-    plain, _ = envelope.fit_envelope(sink.scaled(3.0), device, 0.15)
-    robust, scale = envelope.fit_envelope(sink.scaled(3.0), device, 0.15, tolerance=envelope.PlantTolerance())
+    # On a device that judges corrected tables through the nominal plant alone (allowance 0):
+    strict = dataclasses.replace(device, limits=dataclasses.replace(device.limits, plant_model_allowance=0.0))
+    plain, _ = envelope.fit_envelope(sink.scaled(3.0), strict, 0.15)
+    robust, scale = envelope.fit_envelope(sink.scaled(3.0), strict, 0.15, tolerance=envelope.PlantTolerance())
     assert checker.check_motion(robust).within(0.85)
     over_plain, over_robust = worst_corrected(plain), worst_corrected(robust)
     assert np.sum(over_plain > 1.0) >= 2             # the bug: corrections scaled back
     assert np.all(over_robust <= 1.0)
     ratios = envelope.corrected_motion_ratios(robust, device, envelope.PlantTolerance())
     assert max(ratios.values()) <= 0.85 + 1e-9
+    # The default device judges their plate-side limits on the measured plate and bounds the nominal
+    # reading by 1 + limits.plant_model_allowance: the planner keeps the reading under that bound
+    # with its headroom, and so plans stronger motions.
+    bound = 1.0 + device.limits.plant_model_allowance
+    loose, loose_scale = envelope.fit_envelope(sink.scaled(3.0), device, 0.15, tolerance=envelope.PlantTolerance())
+    assert loose_scale > scale and checker.check_motion(loose).within(0.85)
+    assert np.all(worst_corrected(loose) <= bound)
+    ratios = envelope.corrected_motion_ratios(loose, device, envelope.PlantTolerance())
+    assert max(ratios.values()) <= 0.85 * bound + 1e-9
     with pytest.raises(ConfigError, match="gain"):
         envelope.PlantTolerance(gain=0.7)
 

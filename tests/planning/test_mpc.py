@@ -338,9 +338,14 @@ def test_keep_clear_predicts_the_uncommanded_parts_where_the_candidate_takes_the
 def test_the_stack_plant_model_plays_what_the_feedback_and_the_checker_allow():
     from ppod_ros.planning.simulate import ActuatorPlantError
 
-    device = default_device_config()
+    # A device that judges corrected tables through the nominal plant alone (allowance 0), where this
+    # plant's corrections are scaled back; the default device judges their plate-side limits on the
+    # measured plate (here the true one) and lets them through in full.
+    default = default_device_config()
+    device = dataclasses.replace(default, limits=dataclasses.replace(default.limits, plant_model_allowance=0.0))
     sink = PlateMotion.single(30.0, [16.0, 19.0, 1.2, 33.0, 28.0, 107.0], [0.1, 1.5, 1.0, 2.9, -0.4, 1.6])
     plain, _ = envelope.fit_envelope(sink.scaled(3.0), device, 0.15)
+    assert ActuatorPlantError.random(np.random.default_rng(5), default).max_correction(plain) == 1.0
     plant = ActuatorPlantError.random(np.random.default_rng(5), device)
     w = np.array([1, 1, 1, 0.1, 0.1, 0.1])
 

@@ -15,8 +15,9 @@ planner chooses the plate motion itself, not a field kind:
             loses contact at any commanded part is rejected.
   search    candidates: the last motion, the plate at rest, the template fields (the sink
             centred on each goal, a rotation about a rigid part both ways, the orienting motion
-            through its goal; designed once at the centre and moved with exact transformations;
-            the best few ranked fitted into the envelope), then Gauss-Newton
+            through its goal, the spin of a rigid part in place both ways, the transport the way
+            a part not yet near its goal has to go; designed once at the centre and moved with
+            exact transformations; the best few ranked fitted into the envelope), then Gauss-Newton
             steps on the 11 (one frequency) or 23 (two) real inputs from the best of them,
             with finite-difference Jacobians evaluated in one batched call and a trust region
             (``max_change``, relative to the typical axis scales) so a switch is a small change:

@@ -119,7 +119,7 @@ class MpcSettings:
     template_speed_mps: float = 0.02      # the transport design (point part; a bracket about 15 mm/s)
     template_turn_radps: float = 0.3
     strong_turn_from_rad: float = 0.26    # the transport is not tried for a part within near_m of its goal
-                                          # and this angle (15 deg): in the demo (1 mm tolerances) it threw
+                                          # and this angle (15 deg): in the demo (2 mm / 3 deg tolerances) it threw
                                           # the parts near their goals about for 60 s (the spin is needed
                                           # there for the bracket's last degrees: without it 5 of 10
                                           # three-part scenes against 7 of 10)

@@ -160,7 +160,8 @@ def correct_table(
         table = quantise_currents(plan.currents_a + base + s * step)
         report = envelope.check_table(plan.frequency_hz, table)
         plate = None if anchor is None else anchor.ratios(table)
-        over = [n for n in LIMIT_ORDER if _over(n, report.ratios, plate, allowed_ratio[n], lim.plant_model_allowance)]
+        allowance = lim.plant_model_allowance
+        over = [n for n in LIMIT_ORDER if limit_over(n, report.ratios, plate, allowed_ratio[n], allowance)]
         return table, report, over, plate
 
     def result(table, report, limited_by, scale, plate) -> CorrectionResult:
@@ -198,7 +199,7 @@ def correct_table(
     return result(table, report, limited_by, lo, plate)
 
 
-def _over(name: str, nominal: dict[str, float], plate: dict[str, float] | None, allowed: float,
+def limit_over(name: str, nominal: dict[str, float], plate: dict[str, float] | None, allowed: float,
           allowance: float) -> bool:
     """Whether limit ``name`` is over: on the nominal plant, or for a plate-side limit with a
     measurement, on the measured plate (and on the nominal plant beyond the allowance)."""
@@ -235,4 +236,4 @@ class _MeasuredAnchor:
         return self.planner.envelope.check_plate(self.frequency_hz, accel)[1]
 
 
-__all__ = ["CORRECTION_GUARD", "CorrectionResult", "MeasuredTable", "correct_table"]
+__all__ = ["CORRECTION_GUARD", "CorrectionResult", "MeasuredTable", "correct_table", "limit_over"]

@@ -595,10 +595,13 @@ class MultiTask:
         prediction ramps down from the current motion's velocities."""
         self.phase = "holding"
         rest = PlateMotion.zero(self.current.frequency_hz, name="rest")
-        self._v_current = np.zeros((len(self.goals), 3))
-        if not self.current.is_zero():
-            self._v_current = self._costs([self.current], poses, statuses)[1][0]
+        self._v_current = self._current_velocity(poses)
         return self._switch(t_s, poses, rest, np.zeros((len(self.goals), 3)))
+
+    def _current_velocity(self, poses: np.ndarray) -> np.ndarray:
+        """The model velocities (G, 3) of the commanded parts under the motion now playing (the
+        prediction's ramp starts from them; zero for the plate at rest)."""
+        return self._velocities([self.current], poses)[0][0, :len(self.goals)]
 
     def _plan(self, t_s: float, poses: np.ndarray, statuses: list[PartStatus]) -> PlateMotion | None:
         s = self.settings
@@ -606,9 +609,7 @@ class MultiTask:
             return self._stop(t_s, poses, statuses)
         self.phase = "moving"
         self._update_focus(t_s, statuses)
-        self._v_current = np.zeros((len(self.goals), 3))
-        _c, v_cur = self._costs([self.current], poses, statuses)
-        self._v_current = v_cur[0]
+        self._v_current = self._current_velocity(poses)
         current_cost, current_vel = self._costs([self.current], poses, statuses)
         candidates = [PlateMotion.zero(s.frequency_hz, name="rest")]
         for g, st in zip(self.goals, statuses):

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ppod_ros.actuation.envelope import PLATE_LIMITS
+from ppod_ros.actuation.corrections import limit_over
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import PartDynamics
@@ -152,13 +152,12 @@ class ActuatorPlantError:
                 table = np.zeros((kmax, 6), complex)
                 table[motion.k - 1] = ff + s * full
                 ratios = self._checker.check_table(motion.frequency_hz, table).ratios
-                if allowance <= 0:
-                    return all(r <= 1.0 for r in ratios.values())
-                plate = np.zeros((kmax, 6), complex)
-                plate[motion.k - 1] = X + (1.0 - s) * (P - X)
-                true = self._checker.check_plate(motion.frequency_hz, plate)[1]
-                return all(r <= (1.0 + allowance if n in PLATE_LIMITS else 1.0) for n, r in ratios.items()) and all(
-                    r <= 1.0 for r in true.values())
+                true = None
+                if allowance > 0:
+                    plate = np.zeros((kmax, 6), complex)
+                    plate[motion.k - 1] = X + (1.0 - s) * (P - X)
+                    true = self._checker.check_plate(motion.frequency_hz, plate)[1]
+                return not any(limit_over(n, ratios, true, 1.0, allowance) for n in ratios)
 
             if ok(1.0):
                 s_max = 1.0

@@ -8,7 +8,10 @@ node, scripts, tests) and a :class:`~ppod_ros.can.host.DeviceLink`:
   and nothing reaches the bus. ``dry_run`` validates and predicts without sending.
 * :meth:`apply_correction` adds a feedback correction (per actuator and harmonic, amperes) to the
   active goal's feed-forward table, clipped in step size and scaled back before any actuator
-  limit by the planner, and crossfades it in (never a step on the coils).
+  limit by the planner, and crossfades it in (never a step on the coils). A correction (or a table
+  sent again) never shortens a ramp under way: it is crossfaded over at least what is left of it
+  (:meth:`_ramp_for`; a goal reversing a large motion cut from 0.5 s to 0.05 s by its first
+  correction overshot the legs' stroke by 26 % and faulted the device).
 * :meth:`stop`, :meth:`estop`, :meth:`reset_estop`, :meth:`ramp_down_and_disable`: the ways down.
 * :meth:`state` derives the generator's state from what the device reports (its STATUS frames),
   not from what was asked: ACTIVE only once the device plays the goal at full amplitude.
@@ -110,6 +113,7 @@ class _Active:
     reached: bool = False  # the device has played it at full amplitude
     last_seq: int | None = None  # the newest table sent for it: only that one is ever sent again
     accepted: bool = False  # the device accepted one of its tables
+    ramp_end_s: float = -math.inf  # link clock when the newest table's ramp ends at the latest
 
 
 class WaveformGenerator:
@@ -164,6 +168,7 @@ class WaveformGenerator:
                 self.last_rejection = outcome
                 return outcome
             self._active = _Active(plan, {seq}, np.zeros_like(plan.currents_a), last_seq=seq)
+            self._ramp_for(self._active, plan.ramp_s)
             self._pending = {seq: _Pending(plan.currents_a, plan.frequency_hz, plan.ramp_s, self.link.clock(),
                                            None, None)}
             self._failed = None
@@ -225,7 +230,8 @@ class WaveformGenerator:
                                               measured=measured)
             except (ConfigError, LimitError) as exc:
                 return CorrectionOutcome(False, str(exc))
-            ramp = max(act.plan.ramp_s, self.config.timing.min_ramp_s) if first else self.config.timing.min_ramp_s
+            ramp = self._ramp_for(act, max(act.plan.ramp_s, self.config.timing.min_ramp_s) if first
+                                  else self.config.timing.min_ramp_s, commit=False)
             try:
                 seq = self.link.send_correction(act.plan, result, ramp_s=ramp)
             except DeviceError as exc:
@@ -235,6 +241,7 @@ class WaveformGenerator:
             act.seqs.add(seq)
             act.last_seq = seq
             act.correction_a = result.applied_a
+            self._ramp_for(act, ramp)
             notes = []
             if result.blocked_rows:
                 notes.append(f"no correction at harmonics {list(result.blocked_rows)} (forbidden frequencies)")
@@ -245,6 +252,18 @@ class WaveformGenerator:
                 notes.append(f"scaled by {result.scale:.3f} to stay within {result.limited_by}")
             self.last_correction_note = "; ".join(notes)
             return CorrectionOutcome(True, self.last_correction_note, result, seq)
+
+    def _ramp_for(self, act: _Active, ramp_s: float, commit: bool = True) -> float:
+        """The ramp for a table of ``act`` sent now: ``ramp_s``, or longer if the ramp under way ends
+        later. A new table's crossfade starts from the mix playing (docs/can_protocol.md), so a short
+        one would finish the goal's crossfade in its place: a reversal of a large motion in 0.05 s
+        instead of 0.5 s. ``commit``: the table is sent, its ramp is the one under way from now (the
+        device starts it at the next cycle start at the latest, one period of margin)."""
+        now = self.link.clock()
+        ramp = max(float(ramp_s), act.ramp_end_s - now)
+        if commit:
+            act.ramp_end_s = now + ramp + 1.0 / act.plan.frequency_hz
+        return ramp
 
     # ------------------------------------------------------------------ the ways down
     def stop(self, ramp_s: float | None = None) -> int:
@@ -350,7 +369,8 @@ class WaveformGenerator:
             try:
                 if self.link.status.state not in (DeviceState.ENABLED, DeviceState.RAMPING):
                     self.link.enable()
-                new = self.link.send_table(pending.currents_a, pending.frequency_hz, pending.ramp_s)
+                ramp = pending.ramp_s if stopping else self._ramp_for(act, pending.ramp_s, commit=False)
+                new = self.link.send_table(pending.currents_a, pending.frequency_hz, ramp)
             except DeviceError as exc:
                 why = f"{why}; resend failed: {exc}"
             else:
@@ -363,6 +383,7 @@ class WaveformGenerator:
                 else:
                     act.seqs.add(new)
                     act.last_seq = new
+                    pending.ramp_s = self._ramp_for(act, ramp)
                 return
         if stopping:
             # The stop table did not get through: disabling ramps the plate down as well.

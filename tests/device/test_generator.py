@@ -123,12 +123,16 @@ def test_a_goals_starting_correction_may_reach_its_own_limit_once_and_ramps_with
     out = gen.apply_correction(goal.key, k, start, start=True)
     assert out.applied and "clipped" not in out.reason
     np.testing.assert_allclose(gen.applied_correction_a[0], start[0], atol=2e-3)
-    assert _table_ramps(config, drain(spy)) == [pytest.approx(0.4, abs=1e-3)]  # the goal's ramp, not 50 ms
+    # The goal's ramp, not 50 ms (what is left of it at the latest: it starts at the next cycle start).
+    [ramp] = _table_ramps(config, drain(spy))
+    assert 0.4 - 1e-3 <= ramp <= 0.4 + 1 / 30 + 1e-3
     # Only the first correction of a goal is a start: a second one is an ordinary, clipped learning step.
     again = gen.apply_correction(goal.key, k, 1.4 * yaw[None, :] + 0.0j, start=True)
     assert again.applied and "correction_step_a" in again.reason
     assert np.abs(gen.applied_correction_a[0] - start[0]).max() <= config.limits.correction_step_a + 2e-3
-    assert _table_ramps(config, drain(spy)) == [pytest.approx(config.timing.min_ramp_s, abs=1e-3)]
+    # ... sent at once, within the goal's ramp: over what is left of it, never the 50 ms correction ramp.
+    [ramp] = _table_ramps(config, drain(spy))
+    assert config.timing.min_ramp_s < ramp <= 0.4 + 2 / 30 + 1e-3
     # A start larger than its own limit is clipped to it, on the next goal.
     gen.submit(LINESINKX)
     big = gen.apply_correction(LINESINKX.key, k, 3.0 * yaw[None, :] + 0.0j, start=True)
@@ -290,3 +294,51 @@ def test_a_correction_is_judged_on_the_measured_plate_only_when_measured_on_the_
     assert fresh.applied and fresh.result.measured_ratios is not None
     assert set(fresh.result.measured_ratios) == {"limits.plate_accel_mps2", "limits.plate_angular_accel_radps2",
                                                  "limits.contact_margin_mps2"}
+
+
+def test_a_correction_during_a_goals_ramp_never_shortens_it():
+    """Found in the demo: the planner reversed a spin (alpha_z 312 -> 331 rad/s^2, opposite phase) and the
+    feedback's next correction arrived 16 ms into the goal's 0.5 s ramp. Sent with the 50 ms correction
+    ramp, it crossfaded from the mix playing (still the old motion) to the new one in 50 ms: the legs
+    overshot to 2.4 mm and the device faulted on stroke (limit 2 mm)."""
+    config = default_device_config().with_can(interface="virtual", channel=f"test-gen-{next(_channels)}")
+    dev_bus, host_bus, spy = open_bus(config.can), open_bus(config.can), open_bus(config.can)
+    device = SimDevice(config, dev_bus, seed=7)
+    link = DeviceLink(host_bus, config, clock=lambda: device.time_s)
+    gen = WaveformGenerator(link, GoalPlanner(config))
+    legs = []
+    check = device._check_faults
+
+    def watch(current, voltage, leg, end_s):
+        legs.append((end_s, float(np.max(np.abs(leg)))))
+        return check(current, voltage, leg, end_s)
+
+    device._check_faults = watch
+    amp = [5.2, 8.4, 0.4, 12.8, 34.2, 312.0]
+    one = PlateMotion.single(30, amp, [0.26, -0.44, -1.39, 0.33, -2.17, np.pi], name="mpc")
+    other = PlateMotion.single(30, amp, [-3.11, 2.69, -1.57, 0.54, 0.81, 0.0], name="mpc")
+    try:
+        assert gen.submit(one).accepted
+        run(device, link, 1.5, gen)
+        steady = max(m for t, m in legs if t > device.time_s - 0.5)
+        drain(spy)
+        assert gen.submit(other).accepted
+        t_goal = device.time_s
+        run(device, link, 0.02, gen)
+        out = gen.apply_correction(None, np.array([1]), np.full((1, 6), 0.01 + 0j))
+        assert out.applied
+        ramps = _table_ramps(config, drain(spy))
+        # The goal's table (0.5 s), then the correction over what is left of it, not 50 ms.
+        assert ramps[0] == pytest.approx(config.timing.default_ramp_s, abs=1e-3)
+        assert ramps[-1] >= config.timing.default_ramp_s - (device.time_s - t_goal) - 1e-3
+        run(device, link, 1.5, gen)
+        assert device.state == DeviceState.ENABLED and not device.faults
+        during = max(m for t, m in legs if t > t_goal)
+        assert during <= 1.05 * steady < config.limits.leg_stroke_m
+        # After the ramp a correction is crossfaded in over the short correction ramp again.
+        drain(spy)
+        assert gen.apply_correction(None, np.array([1]), np.full((1, 6), 0.02 + 0j)).applied
+        assert _table_ramps(config, drain(spy)) == [pytest.approx(config.timing.min_ramp_s, abs=1e-3)]
+    finally:
+        for bus in (dev_bus, host_bus, spy):
+            bus.shutdown()

@@ -46,6 +46,7 @@ from ppod_ros.estimation import EstimationError
 from ppod_ros.estimation.calibration import calibration_path, load_calibration
 from ppod_ros.estimation.channel_set import ChannelSetSettings
 from ppod_ros.estimation.misfit import MisfitHistory, load_misfit, save_misfit
+from ppod_ros.motion import PlateMotion
 
 
 class AccelFeedbackNode(PpodLifecycleNode):
@@ -197,7 +198,7 @@ class AccelFeedbackNode(PpodLifecycleNode):
                 self.get_logger().warn(f"learned plant: {fallback}")
             self.get_logger().info(f"learning goal '{motion.name}'{source}")
             if initial is not None:
-                self._send_correction(motion.name, self.loop.controller.k, initial, 0)
+                self._send_correction(motion, self.loop.controller.k, initial, 0)
 
     # ------------------------------------------------------------------ summaries
     def _on_summary(self, summary) -> None:
@@ -266,7 +267,7 @@ class AccelFeedbackNode(PpodLifecycleNode):
             self.diagnostics.set("learning", diag.ERROR, f"diverged: {step.message}")
             self._request_stop(f"learning control diverged ({step.message})")
             return
-        self._send_correction(goal.name, step.k, step.correction_a, step.iteration, out.table_seq, out.measured_accel)
+        self._send_correction(goal, step.k, step.correction_a, step.iteration, out.table_seq, out.measured_accel)
         self.get_logger().info(f"'{goal.name}' iteration {step.iteration}: error {100 * step.error_relative:.2f} % "
                                f"measured on device table {out.table_seq}")
         level = diag.OK if step.state in ("converged", "running") else diag.WARN
@@ -274,9 +275,10 @@ class AccelFeedbackNode(PpodLifecycleNode):
                              iteration=step.iteration, error_relative=step.error_relative,
                              out_of_goal_relative=step.out_of_goal_relative, stored=out.stored)
 
-    def _send_correction(self, goal_name: str, k: np.ndarray, table: np.ndarray, iteration: int,
+    def _send_correction(self, goal: PlateMotion, k: np.ndarray, table: np.ndarray, iteration: int,
                          table_seq: int | None = None, measured: np.ndarray | None = None) -> None:
-        msg = HarmonicCorrection(goal_name=goal_name, iteration=int(iteration), absolute=True)
+        msg = HarmonicCorrection(goal_name=goal.name, iteration=int(iteration), absolute=True)
+        msg.goal_key = list(goal.key)  # the generator refuses it for any other goal of the same name
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.k = [int(v) for v in k]
         msg.real_a = np.asarray(table).real.reshape(-1).tolist()

@@ -201,6 +201,8 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         plan = self.gen.active_plan if self.gen is not None else None
         if plan is None or msg.goal_name != plan.motion.name:
             return  # a correction for another (or a finished) goal is never applied
+        # ... nor one for the goal before with the same name (the key names the motion itself).
+        goal_key = bytes(msg.goal_key) if len(msg.goal_key) else None
         k = np.asarray(msg.k, dtype=int)
         table = (np.asarray(msg.real_a) + 1j * np.asarray(msg.imag_a)).reshape(-1, 6) if k.size else np.zeros((0, 6))
         measured = None
@@ -208,7 +210,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
                 and len(msg.measured_imag) == len(msg.measured_real):
             measured = (np.asarray(msg.measured_real) + 1j * np.asarray(msg.measured_imag)).reshape(-1, 6)
         # Iteration 0 is the goal's starting correction (stored or predicted by the learned plant).
-        out = self.gen.apply_correction(None, k, table, absolute=msg.absolute, start=msg.iteration == 0,
+        out = self.gen.apply_correction(goal_key, k, table, absolute=msg.absolute, start=msg.iteration == 0,
                                         measured_accel=measured, measured_seq=int(msg.measured_table_seq) or None)
         level = diag.OK if out.applied and not out.reason else diag.WARN
         extra = {}

@@ -44,7 +44,7 @@ def test_feedback_drives_the_plate_to_the_goal_within_one_percent(ros, tmp_path)
         first = next(a for a in accel if a.converged)
         assert first.iteration <= 5 and first.error_relative <= 0.01
         assert first.out_of_goal_relative <= 0.005
-        assert corr and all(c.goal_name == "LineSinkX" and c.absolute for c in corr)
+        assert corr and all(c.goal_name == "LineSinkX" and c.absolute and bytes(c.goal_key) == goal.key for c in corr)
         # Every learning step carries the plate measured on the device table it was taken on, for the
         # generator to judge the plate-side limits on (docs/device.md).
         steps = [c for c in corr if c.iteration >= 1]

@@ -184,3 +184,35 @@ def test_a_raw_capture_on_request_is_written_as_a_recording(ros, sim, tmp_path):
     assert rec.channels == layout.names and rec.meta["motion"] == "LineSinkX"
     est = AccelEstimator(layout, harmonics=6).from_recording(rec, 0)
     assert est.phasors.shape[1] == 6 and abs(est.phasors[0, 0]) > 1.0  # the plate's p''x, read from raw samples
+
+
+def test_a_correction_learned_for_another_goal_of_the_same_name_is_never_applied(ros, sim):
+    """The field planner names every motion "mpc": a correction in flight for the goal before must not
+    land on the next one (the goal key in HarmonicCorrection names the motion itself)."""
+    import numpy as np
+    from ppod_msgs.msg import HarmonicCorrection
+    from ppod_msgs.srv import SetPlateMotion
+
+    from ppod_nodes.common import qos, topics
+    from ppod_ros.motion import PlateMotion
+
+    node = _node(ros, sim)
+    first = PlateMotion.from_yaml_text(LINESINKX)
+    second = PlateMotion.from_yaml_text(LINESINKX.replace("[10, 0, 0, 0, 100, 0]", "[8, 0, 0, 0, 80, 0]"))
+    for motion in (first, second):
+        resp = ros.call(SetPlateMotion, "/" + topics.SET_MOTION, _request(motion.to_yaml()))
+        assert resp.accepted, resp.reason
+    pub = node.create_publisher(HarmonicCorrection, topics.CORRECTION, qos.COMMANDS)
+
+    def correction(key: bytes, amps: float) -> HarmonicCorrection:
+        msg = HarmonicCorrection(goal_name="LineSinkX", iteration=1, absolute=True, k=[1])
+        msg.real_a, msg.imag_a = [amps] * 6, [0.0] * 6
+        msg.goal_key = list(key)
+        return msg
+
+    pub.publish(correction(first.key, 0.1))      # learned for the goal before: same name, refused
+    ros.wait_until(lambda: False, 0.5)
+    assert not np.any(node.gen.applied_correction_a)
+    pub.publish(correction(second.key, 0.1))     # for the goal playing: applied
+    assert ros.wait_until(lambda: node.gen.applied_correction_a is not None
+                          and np.any(node.gen.applied_correction_a), 3)

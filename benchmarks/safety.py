@@ -214,6 +214,23 @@ def _random_goal(rng, lim):
     return PlateMotion(f, ks, amp, phase, name=f"fuzz-{rng.integers(1e9)}", ramp_time_s=ramp)
 
 
+def _spin_goal(rng, planner, lim):
+    """A 30 Hz turn about z with some translation, scaled to 60-95 % of the legs' stroke (None if the
+    envelope refuses it anyway)."""
+    from ppod_ros.errors import ConfigError, LimitError
+    from ppod_ros.motion import PlateMotion
+
+    amp = np.concatenate([rng.uniform(0, 10, 2), rng.uniform(0, 1, 1), rng.uniform(0, 40, 2), [300.0]])
+    goal = PlateMotion.single(30, amp, rng.uniform(0, 2 * math.pi, 6), name="spin", ramp_time_s=0.5)
+    try:
+        use = float(np.max(planner.plan(goal.scaled(0.1)).stroke_peak_m)) * 10 / lim.leg_stroke_m
+        goal = goal.scaled(rng.uniform(0.6, 0.95) / use)
+        planner.plan(goal)
+    except (ConfigError, LimitError):
+        return None
+    return goal
+
+
 def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None) -> dict:
     """Run the fuzzing campaign; returns the counts (see the module docstring)."""
     import itertools
@@ -224,6 +241,7 @@ def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None
     from ppod_ros.can.protocol import quantise_currents, quantise_frequency
     from ppod_ros.device import default_device_config
     from ppod_ros.errors import DeviceError
+    from ppod_ros.motion import PlateMotion
     from ppod_sim.device import SimDevice
 
     rng = np.random.default_rng(seed)
@@ -333,12 +351,31 @@ def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None
             guarded("stop", gen.stop)
             counts["stops"] += 1
         goal = _random_goal(rng, lim)
+        reversal = rng.random() < 0.05
+        if reversal:
+            # A spin at 60-95 % of the legs' stroke played, then reversed (the planner turning a part
+            # the other way), with a correction 0-60 ms into the reversal's ramp: corrections must not
+            # shorten the goal's ramp (crossfaded in 50 ms, the legs overshoot the stroke and the
+            # device faults).
+            spin = _spin_goal(rng, gen.planner, lim)
+            if spin is not None:
+                guarded("submit", gen.submit, spin)
+                pump(1.0)
+                goal = PlateMotion(spin.frequency_hz, spin.k, spin.amplitude, spin.phase + math.pi,
+                                   name=spin.name, ramp_time_s=0.5)
+                counts["reversals (a spin near the stroke limit reversed, corrected in its ramp)"] += 1
+            else:
+                reversal = False
         counts["goals"] += 1
         out = guarded("submit", gen.submit, goal, dry_run=bool(rng.random() < 0.05))
         if out is not None:
             counts["goals accepted" if out.accepted else "goals rejected"] += 1
             if out.accepted and out.seq is not None:
                 playing[0] = out.seq
+        if reversal and out is not None and out.accepted:
+            pump(float(rng.uniform(0.0, 0.06)))
+            guarded("correction", gen.apply_correction, None, np.array([1]),
+                    np.full((1, 6), 0.01 + 0j), absolute=True)
         pump(float(rng.uniform(0.03, 0.1)))
         plan = gen.active_plan
         for _ in range(int(rng.integers(0, 4))):
@@ -504,8 +541,9 @@ def run(args: argparse.Namespace) -> int:
     for name in sorted(flips):
         print(f"{name:58s} {flips[name]:8d}")
     bad = (c.get("over-limit tables", 0) + c.get("accepted with current at a forbidden frequency", 0)
+           + c.get("device faults (stroke, voltage, current, thermal)", 0)
            + c.get("accepted tables that differ from what was sent", 0) + c.get("exceptions", 0)
            + flips.get("accepted tables that differ from what was sent", 0))
-    print("\nsafety campaign: " + ("PASS (0 over-limit, 0 forbidden, 0 altered, 0 exceptions)" if bad == 0
-                                   else f"FAIL ({bad} findings)"))
+    verdict = "PASS (0 over-limit, 0 forbidden, 0 altered, 0 exceptions, 0 device faults)"
+    print("\nsafety campaign: " + (verdict if bad == 0 else f"FAIL ({bad} findings)"))
     return 0 if bad == 0 else 1

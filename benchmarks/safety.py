@@ -231,8 +231,9 @@ def _spin_goal(rng, planner, lim):
     return goal
 
 
-def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None) -> dict:
-    """Run the fuzzing campaign; returns the counts (see the module docstring)."""
+def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None, reversals: float = 0.05) -> dict:
+    """Run the fuzzing campaign; returns the counts (see the module docstring). ``reversals``: the
+    fraction of goals that are a spin near the legs' stroke, played and then reversed."""
     import itertools
 
     from ppod_ros.actuation.generator import WaveformGenerator
@@ -351,7 +352,7 @@ def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None
             guarded("stop", gen.stop)
             counts["stops"] += 1
         goal = _random_goal(rng, lim)
-        reversal = rng.random() < 0.05
+        reversal = rng.random() < reversals
         if reversal:
             # A spin at 60-95 % of the legs' stroke played, then reversed (the planner turning a part
             # the other way), with a correction 0-60 ms into the reversal's ramp: corrections must not

@@ -18,13 +18,16 @@ def test_the_independent_checker_agrees_with_the_envelope_on_a_goal():
 
 
 def test_a_short_campaign_with_faults_finds_no_unsafe_table_and_no_exception():
-    res = campaign(40, seed=5, drop=0.05, corrupt=0.05)
+    res = campaign(40, seed=5, drop=0.05, corrupt=0.05, reversals=0.25)
     c = res["counts"]
     assert c["goals"] == 40 and c["tables accepted by the device"] > 0
     assert c.get("over-limit tables", 0) == 0, res["worst"]
     assert c.get("accepted with current at a forbidden frequency", 0) == 0
     assert c.get("accepted tables that differ from what was sent", 0) == 0
     assert c.get("exceptions", 0) == 0, res["exceptions"]
+    # A spin near the legs' stroke reversed, with a correction in its ramp, faults nothing.
+    assert c.get("reversals (a spin near the stroke limit reversed, corrected in its ramp)", 0) > 0, c
+    assert c["device faults (stroke, voltage, current, thermal)"] == 0
     # Corrections judged on a (random, mostly wrong) measured plate were sent too, and stayed within
     # the plate-side limits plus limits.plant_model_allowance on the independent nominal plant.
     assert c.get("corrections judged on a measured plate", 0) > 0, c

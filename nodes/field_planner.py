@@ -183,7 +183,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         self.target_pub = self.create_publisher(PartPoseArray, topics.MOVE_PART_TARGET, qos.LATCHED)  # drawn by viz
         self.progress_pub = self.create_publisher(PlannerProgress, topics.PLANNER_PROGRESS, qos.STREAM)
         self.create_service(PlanField, topics.PLAN_FIELD, self._on_plan_field)
-        self.create_subscription(PartPoseArray, topics.PART_POSES, self._on_poses, qos.STREAM)
+        self.create_subscription(PartPoseArray, topics.PART_POSES, self._on_poses, qos.LATEST)
         self._stop_client = self.create_client(Trigger, topics.STOP)
         self._action = ActionServer(self, MovePart, topics.MOVE_PART, execute_callback=self._execute,
                                     goal_callback=self._on_goal_request, cancel_callback=self._on_cancel)

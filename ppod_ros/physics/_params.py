@@ -154,10 +154,11 @@ def _warm_up(todo) -> None:
     # Import here: the kernels' modules compile lazily on first call.
     from ppod_ros.motion import PlateMotion
     from ppod_ros.parts import published_rigid_part
-    from ppod_ros.physics import _dynamics_kernel, _solve
+    from ppod_ros.physics import _dynamics_kernel, _numba_start, _solve
     from ppod_ros.physics.plate import motion_table
     from ppod_ros.physics.settings import SolverSettings
 
+    _numba_start.prepare()
     motion = PlateMotion.single(30.0, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0])
     mc = motion_table(motion)
     settings = SolverSettings()

@@ -61,3 +61,4 @@ def test_scipy_linalg_imported_after_the_kernels_load_is_complete_and_numba_keep
         "print('ok')\n"
     )
     assert _run(code).strip().endswith("ok")
+

@@ -486,7 +486,7 @@ def _run(motions, part, cfg, X0, R0, has, settings, progress):
     nthreads = _threads.plan(cost_kind, M * n, settings.threads, is_loaded(("field", kind, True)))
     kernel = solve_motions if nthreads > 1 else solve_motions_serial
     setup = ensure_compiled(("field", kind, nthreads > 1))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     with _threads.thread_count(nthreads):
         # Progress: split into ~20 slices aligned to the chunks (same results as one call).
         if progress is None:
@@ -504,7 +504,7 @@ def _run(motions, part, cfg, X0, R0, has, settings, progress):
                 for o, part_out in zip((out_v, out_x, out_s, out_p, out_f, out_r), outs):
                     o[:, a:b] = part_out
                 progress(M * b, M * n)
-    _threads.learn(cost_kind, M * n, time.perf_counter() - t0, nthreads)
+    _threads.learn(cost_kind, M * n, time.perf_counter() - t0, nthreads, time.thread_time() - c0)
     return nthreads, setup, (out_v, out_x, out_s, out_p, out_f, out_r)
 
 

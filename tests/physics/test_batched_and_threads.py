@@ -65,6 +65,60 @@ def test_small_calls_plan_serial_and_large_ones_parallel_by_learnt_cost(monkeypa
     assert _threads.plan("dyn0", 10, None) == 2
 
 
+def test_stalled_parallel_calls_never_turn_small_calls_parallel(monkeypatch):
+    # On a busy 2-core machine each parallel call waits ~16 ms for its second thread whatever the
+    # work; learnt as cost, that kept 10-part dynamics cycles parallel (and stalling) for good.
+    monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
+    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    for _ in range(20):
+        _threads.learn("dyn0", 10, 0.016, 2)
+    assert _threads.plan("dyn0", 10, None) == 1
+    assert _threads.COST_SMOOTHING > 0.0
+    _threads.learn("dyn0", 1000, 1e-4, 2)  # a fast parallel call does lower the estimate
+    assert _threads._cost["dyn0"] < _threads.SEED_COST_S["dyn0"]
+
+
+def test_serial_calls_learn_their_cost_from_the_threads_cpu_time_not_the_wall_time(monkeypatch):
+    # A serial call preempted for 50 ms by another process did 0.5 ms of work.
+    monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
+    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    for _ in range(20):
+        _threads.learn("dyn0", 10, 0.05, 1, cpu_seconds=0.0005)
+    assert abs(_threads._cost["dyn0"] - 5e-5) < 1e-6
+    assert _threads.plan("dyn0", 10, None) == 1
+
+
+def test_small_dynamics_stay_serial_after_parallel_calls_that_stalled(monkeypatch, point_part):
+    import time
+
+    from ppod_ros.physics import dynamics
+    from ppod_ros.physics._params import ensure_compiled
+
+    ensure_compiled(("dyn", 0, True))  # loaded: the forced calls below do run in parallel
+    monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
+    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    real_parallel, real_plan = dynamics.advance_group, _threads.plan
+
+    def stalled(*args):  # the second thread's wake-up on a busy core: waiting, no work
+        real_parallel(*args)
+        time.sleep(0.02)
+
+    chosen = []
+    monkeypatch.setattr(dynamics, "advance_group", stalled)
+    monkeypatch.setattr(_threads, "plan", lambda *a, **k: chosen.append(real_plan(*a, **k)) or chosen[-1])
+    m = suite_motion("Sink")
+    sim = PartDynamics([point_part] * 10, np.column_stack([np.linspace(-0.05, 0.05, 10), np.zeros(10)]))
+    with monkeypatch.context() as forced:
+        forced.setattr(_threads, "PARALLEL_MIN_SECONDS", 0.0)
+        for k in range(8):
+            sim.advance(m, k * m.period_s, m.period_s)
+    auto = len(chosen)
+    for k in range(8, 11):
+        sim.advance(m, k * m.period_s, m.period_s)
+    assert chosen[:auto] == [2] * auto
+    assert chosen[auto:] == [1, 1, 1]
+
+
 def test_a_process_without_the_parallel_kernel_loads_it_only_for_larger_work(monkeypatch):
     monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
     monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)

@@ -175,10 +175,13 @@ def _warm_up(todo) -> None:
         for par, kernel in ((False, _solve.solve_motions_serial), (True, _solve.solve_motions)):
             if ("field", kind, par) not in todo:
                 continue
+            sec = np.zeros((1, n, 2, dim))
             kernel(kind, mc[None], np.array([mc.shape[0]], np.int64), P[None].copy(), np.zeros((1, n, dim)),
-                   np.zeros((1, n), np.bool_), R, np.array([motion.period_s]), np.array([1], np.int64),
+                   np.zeros((1, n), np.bool_), R, sec, sec.copy(), np.zeros((1, n), np.int64),
+                   np.array([motion.period_s]), np.array([1], np.int64),
                    tab.A, tab.B, tab.C, tab.E, tab.E3, S, np.zeros((1, n, dim)), np.zeros((1, n, dim)),
-                   np.zeros((1, n), np.int64), np.zeros((1, n), np.int64), np.zeros((1, n)), np.ones((1, n)))
+                   np.zeros((1, n), np.int64), np.zeros((1, n), np.int64), np.zeros((1, n)), np.ones((1, n)),
+                   sec.copy(), sec.copy(), np.zeros((1, n), np.int64))
         dyn = tuple(k for par, k in ((False, _dynamics_kernel.advance_group_serial),
                                      (True, _dynamics_kernel.advance_group)) if ("dyn", kind, par) in todo)
         if dyn:

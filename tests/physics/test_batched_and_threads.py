@@ -181,6 +181,55 @@ def test_warm_starts_from_a_previous_call_cost_about_one_period_at_the_same_accu
     assert len(warm) == int(cold.valid.sum())
 
 
+def _candidates(sink, calls, seed=2):
+    """A planner's candidates: the motion's amplitudes changed by about 1 % from call to call."""
+    rng = np.random.default_rng(seed)
+    scale = 1.0 + 0.01 * rng.standard_normal((calls,) + sink.amplitude.shape)
+    return [PlateMotion(sink.frequency_hz, sink.k, sink.amplitude * f, sink.phase) for f in scale]
+
+
+def test_warm_starts_carry_each_configurations_own_secant_differences_to_the_next_call(point_part, monkeypatch):
+    sink = suite_motion("Sink")
+    cfg = np.random.default_rng(1).uniform(-0.06, 0.06, (37, 2))
+    motions = _candidates(sink, 5)
+    own = WarmStarts()
+    runs = [solve_fields([m], point_part, cfg, NOCACHE, warm=own) for m in motions]
+    # The same calls with the stored differences withheld: the first step uses the previous
+    # configuration's (a point elsewhere on the plate), as it did before.
+    real = WarmStarts.secants
+    monkeypatch.setattr(WarmStarts, "secants", lambda self, *a: tuple(np.zeros_like(x) for x in real(self, *a)))
+    neighbour = WarmStarts()
+    before = [solve_fields([m], point_part, cfg, NOCACHE, warm=neighbour) for m in motions]
+    def mean_periods(results):
+        return np.mean([r.periods[0][r.valid[0]].mean() for r in results[1:]])
+
+    assert mean_periods(runs) < 0.85 * mean_periods(before)
+    # At the accuracy of a fresh solve: within the fixed-point tolerance (1e-5 x the velocity
+    # scale, about 0.075 m/s here) of the accurate preset.
+    accurate = PRESETS["accurate"].replace(cache=False)
+    for m, r in zip(motions[1:], runs[1:]):
+        ref = solve_fields([m], point_part, cfg, accurate, warm=False)
+        ok = r.valid[0]
+        assert np.abs(r.velocity[0][ok] - ref.velocity[0][ok]).max() < 1e-5 * 0.075 * 1.5
+
+
+def test_warm_starts_keep_a_configurations_secant_differences_until_new_ones_come():
+    warm = WarmStarts()
+    cfg = np.array([[0.01, 0.02], [0.03, 0.04]])
+    dx = np.arange(8.0).reshape(2, 2, 2)
+    warm.store(("p", "s"), cfg, np.ones((2, 2)), np.full(2, 0.1), np.array([True, True]),
+               (dx, -dx, np.array([2, 1])))
+    sx, sf, sn = warm.secants(("p", "s"), cfg, 2, 2)
+    assert sn.tolist() == [2, 1]
+    assert np.array_equal(sx[0], dx[0]) and np.array_equal(sf[0], -dx[0]) and np.array_equal(sx[1, 0], dx[1, 0])
+    warm.store(("p", "s"), cfg, np.zeros((2, 2)), np.full(2, 0.2), np.array([True, True]),
+               (dx * 0, dx * 0, np.array([0, 0])))  # converged without new differences: the old ones stay
+    assert np.array_equal(warm.secants(("p", "s"), cfg, 2, 2)[0], sx)
+    assert warm.secants(("p", "s"), cfg, 2, 1)[2].tolist() == [1, 1]  # the newest rows when fewer fit
+    assert np.array_equal(warm.secants(("p", "s"), cfg, 2, 1)[0][0, 0], dx[0, 1])
+    assert warm.lookup(("p", "s"), cfg, 2)[1].tolist() == [0.2, 0.2]
+
+
 def test_one_sticking_heavy_motion_for_the_benchmark_and_the_goal_presets():
     data = Path(__file__).resolve().parents[2] / "ppod_ros" / "data" / "motions"
     for path in sorted(data.glob("*.yaml")):

@@ -213,6 +213,24 @@ def test_warm_starts_carry_each_configurations_own_secant_differences_to_the_nex
         assert np.abs(r.velocity[0][ok] - ref.velocity[0][ok]).max() < 1e-5 * 0.075 * 1.5
 
 
+def test_warm_starts_with_secant_differences_give_the_same_fields_serial_and_parallel(point_part, forced):
+    from ppod_ros.physics._params import ensure_compiled
+
+    ensure_compiled(("field", 0, True))  # loaded, so that the forced calls do run in parallel
+    sink = suite_motion("Sink")
+    cfg = np.random.default_rng(4).uniform(-0.06, 0.06, (20, 2))
+    out = []
+    for parallel in (False, True):
+        forced(parallel)
+        warm = WarmStarts()
+        settings = NOCACHE.replace(threads=2) if parallel else NOCACHE
+        out.append([solve_fields([m], point_part, cfg, settings, warm=warm) for m in _candidates(sink, 3, seed=5)])
+    for a, b in zip(*out):
+        assert np.array_equal(a.velocity, b.velocity, equal_nan=True)
+        assert np.array_equal(a.periods, b.periods)
+    assert out[1][-1].threads == 2 and out[0][-1].threads == 1
+
+
 def test_warm_starts_keep_a_configurations_secant_differences_until_new_ones_come():
     warm = WarmStarts()
     cfg = np.array([[0.01, 0.02], [0.03, 0.04]])

@@ -27,6 +27,10 @@ NOCACHE = SolverSettings(cache=False)
 def forced(monkeypatch):
     """Force the parallel kernels (threshold 0) or the serial ones (threshold infinite)."""
     def force(parallel: bool):
+        if parallel:  # loaded: an unloaded parallel kernel also needs PARALLEL_LOAD_S of expected work
+            from ppod_ros.physics._params import ALL_KERNELS, ensure_compiled
+
+            ensure_compiled(*[k for k in ALL_KERNELS if k[2]])
         monkeypatch.setattr(_threads, "PARALLEL_MIN_SECONDS", 0.0 if parallel else float("inf"))
     return force
 

@@ -78,7 +78,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
             description=module.__doc__,
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
-        module.add_arguments(p)
+        if only:  # a listing (`ppod --help`) needs no subcommand's arguments, nor what they import
+            module.add_arguments(p)
         p.set_defaults(_module=module)
     return parser
 

@@ -154,10 +154,11 @@ def _warm_up(todo) -> None:
     # Import here: the kernels' modules compile lazily on first call.
     from ppod_ros.motion import PlateMotion
     from ppod_ros.parts import published_rigid_part
-    from ppod_ros.physics import _dynamics_kernel, _solve
+    from ppod_ros.physics import _dynamics_kernel, _numba_start, _solve
     from ppod_ros.physics.plate import motion_table
     from ppod_ros.physics.settings import SolverSettings
 
+    _numba_start.prepare()
     motion = PlateMotion.single(30.0, [10, 0, 0, 0, 100, 0], [0, 0, 0, 0, 4.71238898, 0])
     mc = motion_table(motion)
     settings = SolverSettings()
@@ -174,10 +175,13 @@ def _warm_up(todo) -> None:
         for par, kernel in ((False, _solve.solve_motions_serial), (True, _solve.solve_motions)):
             if ("field", kind, par) not in todo:
                 continue
+            sec = np.zeros((1, n, 2, dim))
             kernel(kind, mc[None], np.array([mc.shape[0]], np.int64), P[None].copy(), np.zeros((1, n, dim)),
-                   np.zeros((1, n), np.bool_), R, np.array([motion.period_s]), np.array([1], np.int64),
+                   np.zeros((1, n), np.bool_), R, sec, sec.copy(), np.zeros((1, n), np.int64),
+                   np.array([motion.period_s]), np.array([1], np.int64),
                    tab.A, tab.B, tab.C, tab.E, tab.E3, S, np.zeros((1, n, dim)), np.zeros((1, n, dim)),
-                   np.zeros((1, n), np.int64), np.zeros((1, n), np.int64), np.zeros((1, n)), np.ones((1, n)))
+                   np.zeros((1, n), np.int64), np.zeros((1, n), np.int64), np.zeros((1, n)), np.ones((1, n)),
+                   sec.copy(), sec.copy(), np.zeros((1, n), np.int64))
         dyn = tuple(k for par, k in ((False, _dynamics_kernel.advance_group_serial),
                                      (True, _dynamics_kernel.advance_group)) if ("dyn", kind, par) in todo)
         if dyn:

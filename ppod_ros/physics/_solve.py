@@ -413,11 +413,16 @@ def _anderson(Xh, Fh, q, dim, tolv, x):
 
 
 @njit(cache=True, error_model="numpy")
-def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_v, out_x, out_status,
-                out_periods, out_stick, out_rate, lo, hi):
+def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C, E, E3, S, out_v, out_x,
+                out_status, out_periods, out_stick, out_rate, out_sx, out_sf, out_sn, lo, hi):
     """Configurations ``lo .. hi - 1`` in order (with ``warm`` on, each starts from the previous
     one's limit cycle and contraction rate). ``R0`` holds prior contraction rates for rows with
-    ``has_x0`` (>= 1: none); ``out_rate`` the rates estimated here (1: none, e.g. closed form)."""
+    ``has_x0`` (>= 1: none); ``out_rate`` the rates estimated here (1: none, e.g. closed form).
+
+    ``SX0``, ``SF0`` (N, depth, dim), ``SN0`` (N,): secant differences of a row's own period map
+    from an earlier call (its first ``SN0`` rows; 0: none), used for the first step of a point part
+    warm-started at that row instead of the previous configuration's; ``out_sx``, ``out_sf``,
+    ``out_sn``: the differences of each row's own map as they end here (0 rows: none known)."""
     dim = 2 if kind == 0 else 3
     n = 2 * dim
     nscan = int(S[S_NSCAN]) * kmax
@@ -452,6 +457,7 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
         out_stick[i] = np.nan
         out_periods[i] = 0
         out_rate[i] = 1.0
+        out_sn[i] = 0
         if kind == 0:
             px = P[PP_X]
             py = P[PP_Y]
@@ -573,11 +579,31 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
             # secant differences (a quasi-Newton step); otherwise none are used, but they are kept.
             if not (kind == 0 and (has_x0[i] or (have_warm and last_ok == i - 1)) and S[S_WARM] > 0.0):
                 carry[0] = -1.0 if not (kind == 0 and S[S_WARM] > 0.0) else 0.0
+            # A row warm-started from an earlier call takes the secant differences of its own map
+            # there (nearly its Jacobian now: the motion changed little), not its neighbour's.
+            own = kind == 0 and has_x0[i] and SN0[i] > 0 and S[S_WARM] > 0.0 and depth > 0 and SX0.shape[1] > 0
+            if own:
+                nown = min(int(SN0[i]), depth, SX0.shape[1])
+                for a in range(nown):
+                    for j in range(dim):
+                        CX[a, j] = SX0[i, a, j]
+                        CF[a, j] = SF0[i, a, j]
+                carry[0] = nown
             vlim = (1.0 if kind == 0 else 2.0) * vscale + 1e-12
             wlim = 2.0 * wscale + 1e-12
             st, periods, frac, h = fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew,
                                                ybest, W, sc, n, dim, tolv, zero_tol, vlim, wlim, vres, xres,
                                                stats, prior, CX, CF, carry)
+            if st == OK and kind == 0 and carry[0] >= 1.0:
+                # This row's own differences: all of them if it started with its own, else the
+                # ones its own periods added (one per period after the second).
+                nc = int(carry[0])
+                keep = min(nc if own else max(periods - 2, 0), nc, out_sx.shape[1])
+                for a in range(keep):
+                    for j in range(dim):
+                        out_sx[i, a, j] = CX[nc - keep + a, j]
+                        out_sf[i, a, j] = CF[nc - keep + a, j]
+                out_sn[i] = keep
             if st != OK:
                 carry[0] = 0.0
             if st == OK and kind == 1 and S[S_STARTS] > 1.5:
@@ -605,13 +631,15 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, T, kmax, A, B, C, E, E3, S, out_
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
-def solve_motions(kind, MC, rows, Pall, X0, has_x0, R0, Ts, kmaxs, A, B, C, E, E3, S, out_v, out_x,
-                  out_status, out_periods, out_stick, out_rate):
+def solve_motions(kind, MC, rows, Pall, X0, has_x0, R0, SX0, SF0, SN0, Ts, kmaxs, A, B, C, E, E3, S, out_v,
+                  out_x, out_status, out_periods, out_stick, out_rate, out_sx, out_sf, out_sn):
     """M motions x N configurations, in parallel over (motion, chunk of configurations).
 
     MC (M, R, TABLE_COLS): motion tables, motion m using its first ``rows[m]`` rows; Pall (M, N, size):
     parameter rows (written to: one copy per motion); X0, out_v, out_x (M, N, dim); has_x0, R0,
-    out_* (M, N); Ts, kmaxs (M,): periods and highest harmonics.
+    out_* (M, N); SX0, SF0, out_sx, out_sf (M, N, depth, dim) and SN0, out_sn (M, N): each row's own
+    secant differences from an earlier call and as they end (:func:`solve_chunk`); Ts, kmaxs (M,):
+    periods and highest harmonics.
     """
     M = Pall.shape[0]
     N = Pall.shape[1]
@@ -620,14 +648,15 @@ def solve_motions(kind, MC, rows, Pall, X0, has_x0, R0, Ts, kmaxs, A, B, C, E, E
     for job in prange(M * nch):
         m = job // nch
         ci = job - m * nch
-        solve_chunk(kind, MC[m, :rows[m]], Pall[m], X0[m], has_x0[m], R0[m], Ts[m], kmaxs[m], A, B, C, E, E3,
-                    S, out_v[m], out_x[m], out_status[m], out_periods[m], out_stick[m], out_rate[m],
-                    ci * chunk, min(N, (ci + 1) * chunk))
+        solve_chunk(kind, MC[m, :rows[m]], Pall[m], X0[m], has_x0[m], R0[m], SX0[m], SF0[m], SN0[m], Ts[m],
+                    kmaxs[m], A, B, C, E, E3, S, out_v[m], out_x[m], out_status[m], out_periods[m],
+                    out_stick[m], out_rate[m], out_sx[m], out_sf[m], out_sn[m], ci * chunk,
+                    min(N, (ci + 1) * chunk))
 
 
 @njit(cache=True, error_model="numpy")
-def solve_motions_serial(kind, MC, rows, Pall, X0, has_x0, R0, Ts, kmaxs, A, B, C, E, E3, S, out_v, out_x,
-                         out_status, out_periods, out_stick, out_rate):
+def solve_motions_serial(kind, MC, rows, Pall, X0, has_x0, R0, SX0, SF0, SN0, Ts, kmaxs, A, B, C, E, E3, S,
+                         out_v, out_x, out_status, out_periods, out_stick, out_rate, out_sx, out_sf, out_sn):
     """:func:`solve_motions` on the calling thread only (same chunks, same results): no thread
     wake-ups, so no stall when the other core is busy."""
     M = Pall.shape[0]
@@ -637,9 +666,10 @@ def solve_motions_serial(kind, MC, rows, Pall, X0, has_x0, R0, Ts, kmaxs, A, B, 
     for job in range(M * nch):
         m = job // nch
         ci = job - m * nch
-        solve_chunk(kind, MC[m, :rows[m]], Pall[m], X0[m], has_x0[m], R0[m], Ts[m], kmaxs[m], A, B, C, E, E3,
-                    S, out_v[m], out_x[m], out_status[m], out_periods[m], out_stick[m], out_rate[m],
-                    ci * chunk, min(N, (ci + 1) * chunk))
+        solve_chunk(kind, MC[m, :rows[m]], Pall[m], X0[m], has_x0[m], R0[m], SX0[m], SF0[m], SN0[m], Ts[m],
+                    kmaxs[m], A, B, C, E, E3, S, out_v[m], out_x[m], out_status[m], out_periods[m],
+                    out_stick[m], out_rate[m], out_sx[m], out_sf[m], out_sn[m], ci * chunk,
+                    min(N, (ci + 1) * chunk))
 
 
 @njit(cache=True, error_model="numpy")

@@ -237,11 +237,11 @@ class PartDynamics:
                                              parallel_ready=is_loaded(("dyn", g.kind, True)))
                     kernel = advance_group if nthreads > 1 else advance_group_serial
                     self.setup_seconds += ensure_compiled(("dyn", g.kind, nthreads > 1))
-                    tk = time.perf_counter()
+                    tk, ck = time.perf_counter(), time.thread_time()
                     with _threads.thread_count(nthreads):
                         kernel(g.kind, mc, g.P, g.Y, g.AUX, g.H, t0, t1, T, kmax, tab.A, tab.B, tab.C, tab.E,
                                tab.E3, S, g.status, g.stick, g.steps)
-                    _threads.learn(cost_kind, units, time.perf_counter() - tk, nthreads)
+                    _threads.learn(cost_kind, units, time.perf_counter() - tk, nthreads, time.thread_time() - ck)
                 self._last_fraction[g.index] = g.stick / duration if duration > 0 else 0.0
             self._time = t_start + duration
         return self.state

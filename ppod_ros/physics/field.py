@@ -178,12 +178,14 @@ class WarmStarts:
     """Limit-cycle starts and contraction rates of configurations solved before, keyed by (part,
     settings, configuration) but not by motion: designs, Jacobians and replanning evaluate the
     same configurations under slightly different motions many times, and the previous cycle start
-    with its contraction rate lets a configuration converge in about one period. Bounded in
-    entries (whole (part, settings) groups are dropped least recently used first)."""
+    with its contraction rate lets a configuration converge in about one period. With them, the
+    secant differences of the configuration's own period map (:meth:`secants`): under a motion that
+    changed a little its first step is then nearly Newton's. Bounded in entries (whole (part,
+    settings) groups are dropped least recently used first)."""
 
     def __init__(self, max_entries: int = 200_000):
         self.max_entries = int(max_entries)
-        self._groups: OrderedDict[tuple, dict[bytes, tuple[np.ndarray, float]]] = OrderedDict()
+        self._groups: OrderedDict[tuple, dict[bytes, tuple]] = OrderedDict()
         self._count = 0
         self._lock = threading.Lock()
 
@@ -209,19 +211,50 @@ class WarmStarts:
             for i, row in enumerate(configs):
                 entry = group.get(row.tobytes())
                 if entry is not None:
-                    x0[i], r0[i] = entry
+                    x0[i], r0[i] = entry[0], entry[1]
                     has[i] = True
         return x0, r0, has
 
+    def secants(self, prefix: tuple, configs: np.ndarray, dim: int, rows: int) -> tuple[np.ndarray, ...]:
+        """(dx (N, rows, dim), dF (N, rows, dim), count (N,)): the stored secant differences of each
+        configuration's own period map, newest last (count 0: none stored)."""
+        n = configs.shape[0]
+        sx = np.zeros((n, rows, dim))
+        sf = np.zeros((n, rows, dim))
+        sn = np.zeros(n, np.int64)
+        with self._lock:
+            group = self._groups.get(prefix)
+            if group is None or rows == 0:
+                return sx, sf, sn
+            for i, row in enumerate(configs):
+                entry = group.get(row.tobytes())
+                if entry is not None and len(entry) > 2:
+                    pairs = entry[2]  # (2, stored rows, dim): dx rows, then dF rows
+                    k = min(rows, pairs.shape[1])
+                    sx[i, :k] = pairs[0, pairs.shape[1] - k:]
+                    sf[i, :k] = pairs[1, pairs.shape[1] - k:]
+                    sn[i] = k
+        return sx, sf, sn
+
     def store(self, prefix: tuple, configs: np.ndarray, starts: np.ndarray, rates: np.ndarray,
-              ok: np.ndarray) -> None:
+              ok: np.ndarray, secants: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+        """Keep the converged (``ok``) rows' starts and rates, and their own map's secant differences
+        ``secants`` = (dx, dF (N, rows, dim), count (N,)) where counted (else those stored before)."""
         with self._lock:
             group = self._groups.setdefault(prefix, {})
             self._groups.move_to_end(prefix)
             before = len(group)
-            for row, x, r, good in zip(configs, starts, rates, ok):
-                if good:
-                    group[row.tobytes()] = (x.copy(), float(r))
+            for i, (row, x, r, good) in enumerate(zip(configs, starts, rates, ok)):
+                if not good:
+                    continue
+                key = row.tobytes()
+                entry = (x.copy(), float(r))
+                k = 0 if secants is None else int(secants[2][i])
+                if k > 0:  # one small array per entry: (2, k, dim)
+                    entry += (np.stack([secants[0][i, :k], secants[1][i, :k]]),)
+                elif key in group and len(group[key]) > 2:
+                    entry += group[key][2:]
+                group[key] = entry
             self._count += len(group) - before
             while self._count > self.max_entries and len(self._groups) > 1:
                 _, old = self._groups.popitem(last=False)
@@ -384,9 +417,17 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
     R0 = np.ones((M, N))
     has = np.zeros((M, N), np.bool_)
     wkey = (part.key, skey)
+    # Each row's own secant differences travel only with warm starts from earlier calls.
+    srows = settings.anderson_depth if (store_w is not None and settings.fixed_point == "anderson"
+                                        and x_init is None) else 0
+    SX0 = np.zeros((M, N, srows, dim))
+    SF0 = np.zeros((M, N, srows, dim))
+    SN0 = np.zeros((M, N), np.int64)
     if store_w is not None:
         for m in range(M):
             X0[m], R0[m], has[m] = store_w.lookup(wkey, cfg[m], dim)
+            if srows:
+                SX0[m], SF0[m], SN0[m] = store_w.secants(wkey, cfg[m], dim, srows)
     if x_init is not None:
         X0[:] = x_init
         R0[:] = 1.0
@@ -403,16 +444,23 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
             X0 = np.take_along_axis(X0, sel[:, :, None], axis=1)
             R0 = np.take_along_axis(R0, sel, axis=1)
             has = np.take_along_axis(has, sel, axis=1)
-        nthreads, setup, out = _run(motions, part, sub, X0, R0, has, settings, progress)
-        ov, ox, os_, op, of, orate = out
+            SX0 = np.ascontiguousarray(np.take_along_axis(SX0, sel[:, :, None, None], axis=1))
+            SF0 = np.ascontiguousarray(np.take_along_axis(SF0, sel[:, :, None, None], axis=1))
+            SN0 = np.ascontiguousarray(np.take_along_axis(SN0, sel, axis=1))
+        nthreads, setup, out = _run(motions, part, sub, X0, R0, has, (SX0, SF0, SN0), settings, progress)
+        ov, ox, os_, op, of, orate, osx, osf, osn = out
         if sel is None:
             velocity, start, code, periods, stick, rates = ov, ox, os_, op, of, orate
+            sec_x, sec_f, sec_n = osx, osf, osn
         else:
+            shape = (M, N) + SX0.shape[2:]
+            sec_x, sec_f, sec_n = np.zeros(shape), np.zeros(shape), np.zeros((M, N), np.int64)
             for m in range(M):
                 rows = np.flatnonzero(miss[m])
                 k = rows.size
                 velocity[m, rows], start[m, rows], code[m, rows] = ov[m, :k], ox[m, :k], os_[m, :k]
                 periods[m, rows], stick[m, rows], rates[m, rows] = op[m, :k], of[m, :k], orate[m, :k]
+                sec_x[m, rows], sec_f[m, rows], sec_n[m, rows] = osx[m, :k], osf[m, :k], osn[m, :k]
         for m, motion in enumerate(motions):
             rows = np.flatnonzero(miss[m])
             if settings.cache and rows.size:
@@ -420,7 +468,8 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
                            for i in rows]
                 store.store((motion.key, part.key, skey), cfg[m, rows], entries)
             if store_w is not None and rows.size:
-                store_w.store(wkey, cfg[m, rows], start[m, rows], rates[m, rows], code[m, rows] == lay.OK)
+                store_w.store(wkey, cfg[m, rows], start[m, rows], rates[m, rows], code[m, rows] == lay.OK,
+                              (sec_x[m, rows], sec_f[m, rows], sec_n[m, rows]))
     seconds = time.perf_counter() - t_start - setup
     return FieldsResult(cfg, velocity, code == lay.OK, code, periods, stick, start, seconds, setup, part.kind,
                         settings, tuple(m.name for m in motions), int(M * N - todo), nthreads)
@@ -455,8 +504,12 @@ def _miss_rows(miss: np.ndarray) -> np.ndarray:
     return sel
 
 
-def _run(motions, part, cfg, X0, R0, has, settings, progress):
-    """Solve cfg (M, N, dim) for every motion; returns (threads used, set-up seconds, outputs)."""
+def _run(motions, part, cfg, X0, R0, has, secants, settings, progress):
+    """Solve cfg (M, N, dim) for every motion; returns (threads used, set-up seconds, outputs).
+
+    ``secants``: (dx, dF (M, N, rows, dim), count (M, N)), each row's own secant differences from
+    earlier calls (rows may be 0); they come back, as they end, after the six field outputs."""
+    SX0, SF0, SN0 = secants
     M, n, dim = cfg.shape
     tables = [motion_table(m, prune=settings.prune_harmonics) for m in motions]
     rows = np.array([t.shape[0] for t in tables], np.int64)
@@ -482,30 +535,35 @@ def _run(motions, part, cfg, X0, R0, has, settings, progress):
     out_p = np.zeros((M, n), np.int64)
     out_f = np.full((M, n), np.nan)
     out_r = np.ones((M, n))
+    out_sx = np.zeros_like(SX0)
+    out_sf = np.zeros_like(SF0)
+    out_sn = np.zeros((M, n), np.int64)
     cost_kind = f"field{kind}"
     nthreads = _threads.plan(cost_kind, M * n, settings.threads, is_loaded(("field", kind, True)))
     kernel = solve_motions if nthreads > 1 else solve_motions_serial
     setup = ensure_compiled(("field", kind, nthreads > 1))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     with _threads.thread_count(nthreads):
         # Progress: split into ~20 slices aligned to the chunks (same results as one call).
         if progress is None:
-            kernel(kind, MC, rows, P, X0, has, R0, Ts, kmaxs, tab.A, tab.B, tab.C, tab.E, tab.E3, S, out_v,
-                   out_x, out_s, out_p, out_f, out_r)
+            kernel(kind, MC, rows, P, X0, has, R0, SX0, SF0, SN0, Ts, kmaxs, tab.A, tab.B, tab.C, tab.E, tab.E3,
+                   S, out_v, out_x, out_s, out_p, out_f, out_r, out_sx, out_sf, out_sn)
         else:
             # ~20 slices aligned to the chunks (same results as one call), each contiguous.
             step = max(chunk, -(-n // 20 // chunk) * chunk)
+            everything = (out_v, out_x, out_s, out_p, out_f, out_r, out_sx, out_sf, out_sn)
             for a in range(0, n, step):
                 b = min(n, a + step)
-                outs = [np.ascontiguousarray(o[:, a:b]) for o in (out_v, out_x, out_s, out_p, out_f, out_r)]
+                outs = [np.ascontiguousarray(o[:, a:b]) for o in everything]
                 c = np.ascontiguousarray
-                kernel(kind, MC, rows, c(P[:, a:b]), c(X0[:, a:b]), c(has[:, a:b]), c(R0[:, a:b]), Ts, kmaxs,
-                       tab.A, tab.B, tab.C, tab.E, tab.E3, S, *outs)
-                for o, part_out in zip((out_v, out_x, out_s, out_p, out_f, out_r), outs):
+                kernel(kind, MC, rows, c(P[:, a:b]), c(X0[:, a:b]), c(has[:, a:b]), c(R0[:, a:b]), c(SX0[:, a:b]),
+                       c(SF0[:, a:b]), c(SN0[:, a:b]), Ts, kmaxs, tab.A, tab.B, tab.C, tab.E, tab.E3, S,
+                       *outs)
+                for o, part_out in zip(everything, outs):
                     o[:, a:b] = part_out
                 progress(M * b, M * n)
-    _threads.learn(cost_kind, M * n, time.perf_counter() - t0, nthreads)
-    return nthreads, setup, (out_v, out_x, out_s, out_p, out_f, out_r)
+    _threads.learn(cost_kind, M * n, time.perf_counter() - t0, nthreads, time.thread_time() - c0)
+    return nthreads, setup, (out_v, out_x, out_s, out_p, out_f, out_r, out_sx, out_sf, out_sn)
 
 
 def grid_configs(x: np.ndarray, y: np.ndarray, theta: np.ndarray | None = None) -> np.ndarray:

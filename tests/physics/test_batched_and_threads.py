@@ -27,6 +27,10 @@ NOCACHE = SolverSettings(cache=False)
 def forced(monkeypatch):
     """Force the parallel kernels (threshold 0) or the serial ones (threshold infinite)."""
     def force(parallel: bool):
+        if parallel:  # loaded: an unloaded parallel kernel also needs PARALLEL_LOAD_S of expected work
+            from ppod_ros.physics._params import ALL_KERNELS, ensure_compiled
+
+            ensure_compiled(*[k for k in ALL_KERNELS if k[2]])
         monkeypatch.setattr(_threads, "PARALLEL_MIN_SECONDS", 0.0 if parallel else float("inf"))
     return force
 
@@ -63,6 +67,60 @@ def test_small_calls_plan_serial_and_large_ones_parallel_by_learnt_cost(monkeypa
     assert _threads.plan("field0", 100_000, 1) == 1  # threads=1: always serial
     _threads.learn("dyn0", 10, 10.0, 1)  # a very slow call raises the learnt cost
     assert _threads.plan("dyn0", 10, None) == 2
+
+
+def test_stalled_parallel_calls_never_turn_small_calls_parallel(monkeypatch):
+    # On a busy 2-core machine each parallel call waits ~16 ms for its second thread whatever the
+    # work; learnt as cost, that kept 10-part dynamics cycles parallel (and stalling) for good.
+    monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
+    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    for _ in range(20):
+        _threads.learn("dyn0", 10, 0.016, 2)
+    assert _threads.plan("dyn0", 10, None) == 1
+    assert _threads.COST_SMOOTHING > 0.0
+    _threads.learn("dyn0", 1000, 1e-4, 2)  # a fast parallel call does lower the estimate
+    assert _threads._cost["dyn0"] < _threads.SEED_COST_S["dyn0"]
+
+
+def test_serial_calls_learn_their_cost_from_the_threads_cpu_time_not_the_wall_time(monkeypatch):
+    # A serial call preempted for 50 ms by another process did 0.5 ms of work.
+    monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
+    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    for _ in range(20):
+        _threads.learn("dyn0", 10, 0.05, 1, cpu_seconds=0.0005)
+    assert abs(_threads._cost["dyn0"] - 5e-5) < 1e-6
+    assert _threads.plan("dyn0", 10, None) == 1
+
+
+def test_small_dynamics_stay_serial_after_parallel_calls_that_stalled(monkeypatch, point_part):
+    import time
+
+    from ppod_ros.physics import dynamics
+    from ppod_ros.physics._params import ensure_compiled
+
+    ensure_compiled(("dyn", 0, True))  # loaded: the forced calls below do run in parallel
+    monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
+    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    real_parallel, real_plan = dynamics.advance_group, _threads.plan
+
+    def stalled(*args):  # the second thread's wake-up on a busy core: waiting, no work
+        real_parallel(*args)
+        time.sleep(0.02)
+
+    chosen = []
+    monkeypatch.setattr(dynamics, "advance_group", stalled)
+    monkeypatch.setattr(_threads, "plan", lambda *a, **k: chosen.append(real_plan(*a, **k)) or chosen[-1])
+    m = suite_motion("Sink")
+    sim = PartDynamics([point_part] * 10, np.column_stack([np.linspace(-0.05, 0.05, 10), np.zeros(10)]))
+    with monkeypatch.context() as forced:
+        forced.setattr(_threads, "PARALLEL_MIN_SECONDS", 0.0)
+        for k in range(8):
+            sim.advance(m, k * m.period_s, m.period_s)
+    auto = len(chosen)
+    for k in range(8, 11):
+        sim.advance(m, k * m.period_s, m.period_s)
+    assert chosen[:auto] == [2] * auto
+    assert chosen[auto:] == [1, 1, 1]
 
 
 def test_a_process_without_the_parallel_kernel_loads_it_only_for_larger_work(monkeypatch):
@@ -125,6 +183,73 @@ def test_warm_starts_from_a_previous_call_cost_about_one_period_at_the_same_accu
     for r in (fresh, again):
         assert np.abs(r.velocity[0][ok] - ref.velocity[0][ok]).max() < tol
     assert len(warm) == int(cold.valid.sum())
+
+
+def _candidates(sink, calls, seed=2):
+    """A planner's candidates: the motion's amplitudes changed by about 1 % from call to call."""
+    rng = np.random.default_rng(seed)
+    scale = 1.0 + 0.01 * rng.standard_normal((calls,) + sink.amplitude.shape)
+    return [PlateMotion(sink.frequency_hz, sink.k, sink.amplitude * f, sink.phase) for f in scale]
+
+
+def test_warm_starts_carry_each_configurations_own_secant_differences_to_the_next_call(point_part, monkeypatch):
+    sink = suite_motion("Sink")
+    cfg = np.random.default_rng(1).uniform(-0.06, 0.06, (37, 2))
+    motions = _candidates(sink, 5)
+    own = WarmStarts()
+    runs = [solve_fields([m], point_part, cfg, NOCACHE, warm=own) for m in motions]
+    # The same calls with the stored differences withheld: the first step uses the previous
+    # configuration's (a point elsewhere on the plate), as it did before.
+    real = WarmStarts.secants
+    monkeypatch.setattr(WarmStarts, "secants", lambda self, *a: tuple(np.zeros_like(x) for x in real(self, *a)))
+    neighbour = WarmStarts()
+    before = [solve_fields([m], point_part, cfg, NOCACHE, warm=neighbour) for m in motions]
+    def mean_periods(results):
+        return np.mean([r.periods[0][r.valid[0]].mean() for r in results[1:]])
+
+    assert mean_periods(runs) < 0.85 * mean_periods(before)
+    # At the accuracy of a fresh solve: within the fixed-point tolerance (1e-5 x the velocity
+    # scale, about 0.075 m/s here) of the accurate preset.
+    accurate = PRESETS["accurate"].replace(cache=False)
+    for m, r in zip(motions[1:], runs[1:]):
+        ref = solve_fields([m], point_part, cfg, accurate, warm=False)
+        ok = r.valid[0]
+        assert np.abs(r.velocity[0][ok] - ref.velocity[0][ok]).max() < 1e-5 * 0.075 * 1.5
+
+
+def test_warm_starts_with_secant_differences_give_the_same_fields_serial_and_parallel(point_part, forced):
+    from ppod_ros.physics._params import ensure_compiled
+
+    ensure_compiled(("field", 0, True))  # loaded, so that the forced calls do run in parallel
+    sink = suite_motion("Sink")
+    cfg = np.random.default_rng(4).uniform(-0.06, 0.06, (20, 2))
+    out = []
+    for parallel in (False, True):
+        forced(parallel)
+        warm = WarmStarts()
+        settings = NOCACHE.replace(threads=2) if parallel else NOCACHE
+        out.append([solve_fields([m], point_part, cfg, settings, warm=warm) for m in _candidates(sink, 3, seed=5)])
+    for a, b in zip(*out):
+        assert np.array_equal(a.velocity, b.velocity, equal_nan=True)
+        assert np.array_equal(a.periods, b.periods)
+    assert out[1][-1].threads == 2 and out[0][-1].threads == 1
+
+
+def test_warm_starts_keep_a_configurations_secant_differences_until_new_ones_come():
+    warm = WarmStarts()
+    cfg = np.array([[0.01, 0.02], [0.03, 0.04]])
+    dx = np.arange(8.0).reshape(2, 2, 2)
+    warm.store(("p", "s"), cfg, np.ones((2, 2)), np.full(2, 0.1), np.array([True, True]),
+               (dx, -dx, np.array([2, 1])))
+    sx, sf, sn = warm.secants(("p", "s"), cfg, 2, 2)
+    assert sn.tolist() == [2, 1]
+    assert np.array_equal(sx[0], dx[0]) and np.array_equal(sf[0], -dx[0]) and np.array_equal(sx[1, 0], dx[1, 0])
+    warm.store(("p", "s"), cfg, np.zeros((2, 2)), np.full(2, 0.2), np.array([True, True]),
+               (dx * 0, dx * 0, np.array([0, 0])))  # converged without new differences: the old ones stay
+    assert np.array_equal(warm.secants(("p", "s"), cfg, 2, 2)[0], sx)
+    assert warm.secants(("p", "s"), cfg, 2, 1)[2].tolist() == [1, 1]  # the newest rows when fewer fit
+    assert np.array_equal(warm.secants(("p", "s"), cfg, 2, 1)[0][0, 0], dx[0, 1])
+    assert warm.lookup(("p", "s"), cfg, 2)[1].tolist() == [0.2, 0.2]
 
 
 def test_one_sticking_heavy_motion_for_the_benchmark_and_the_goal_presets():

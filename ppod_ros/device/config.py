@@ -222,6 +222,7 @@ def _timing(f: Fields, heartbeat_period_s: float) -> DeviceTiming:
         estop_ramp_s=f.number("estop_ramp_s", min_value=1e-3, max_value=MAX_WATCHDOG_RAMP_S, unit="s"),
         default_ramp_s=_positive(f, "default_ramp_s", "s"),
         min_ramp_s=f.number("min_ramp_s", min_value=1e-3, unit="s"),
+        min_goal_ramp_s=f.number("min_goal_ramp_s", 0.2, min_value=1e-3, unit="s"),
     )
     f.finish()
     if out.watchdog_timeout_s < 2 * heartbeat_period_s:
@@ -231,6 +232,9 @@ def _timing(f: Fields, heartbeat_period_s: float) -> DeviceTiming:
         )
     if out.default_ramp_s < out.min_ramp_s:
         raise ConfigError(f"{f.key_path('default_ramp_s')}: must be >= min_ramp_s ({out.min_ramp_s:g} s)")
+    if not out.min_ramp_s <= out.min_goal_ramp_s <= out.default_ramp_s:
+        raise ConfigError(f"{f.key_path('min_goal_ramp_s')}: must be within min_ramp_s .. default_ramp_s "
+                          f"({out.min_ramp_s:g} .. {out.default_ramp_s:g} s), got {out.min_goal_ramp_s:g}")
     return out
 
 

@@ -146,6 +146,7 @@ class DeviceTiming:
     estop_ramp_s: float
     default_ramp_s: float
     min_ramp_s: float
+    min_goal_ramp_s: float = 0.2  # a new goal (a change of motion) is never crossfaded faster than this
 
 
 @dataclass(frozen=True, eq=False)

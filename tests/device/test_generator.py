@@ -342,3 +342,41 @@ def test_a_correction_during_a_goals_ramp_never_shortens_it():
     finally:
         for bus in (dev_bus, host_bus, spy):
             bus.shutdown()
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_a_goal_asking_for_a_50_ms_ramp_is_crossfaded_slowly_enough_for_the_legs(reverse):
+    """Crossfaded in 50 ms, a spin at 61 % of the legs' stroke overshot its steady stroke by 37 % from
+    rest and by 80 % reversed (the device faulted); timing.min_goal_ramp_s (0.2 s) bounds it."""
+    config = default_device_config().with_can(interface="virtual", channel=f"test-gen-{next(_channels)}")
+    dev_bus, host_bus = open_bus(config.can), open_bus(config.can)
+    device = SimDevice(config, dev_bus, seed=7)
+    link = DeviceLink(host_bus, config, clock=lambda: device.time_s)
+    gen = WaveformGenerator(link, GoalPlanner(config))
+    legs = []
+    check = device._check_faults
+
+    def watch(current, voltage, leg, end_s):
+        legs.append((end_s, float(np.max(np.abs(leg)))))
+        return check(current, voltage, leg, end_s)
+
+    device._check_faults = watch
+    amp = [5.2, 8.4, 0.4, 12.8, 34.2, 312.0]
+    phase = np.array([0.26, -0.44, -1.39, 0.33, -2.17, np.pi])
+    try:
+        run(device, link, 0.3, gen)
+        if reverse:
+            assert gen.submit(PlateMotion.single(30, amp, phase, name="one")).accepted
+            run(device, link, 1.5, gen)
+        out = gen.submit(PlateMotion.single(30, amp, phase + (np.pi if reverse else 0.0), name="fast",
+                                            ramp_time_s=0.05))
+        assert out.accepted and out.plan.ramp_s == pytest.approx(config.timing.min_goal_ramp_s)
+        t_goal = device.time_s
+        run(device, link, 1.5, gen)
+        steady = max(m for t, m in legs if t > device.time_s - 0.5)
+        during = max(m for t, m in legs if t > t_goal)
+        assert device.state == DeviceState.ENABLED and not device.faults
+        assert during <= 1.03 * steady
+    finally:
+        for bus in (dev_bus, host_bus):
+            bus.shutdown()

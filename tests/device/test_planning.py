@@ -36,12 +36,12 @@ def test_linesinkx_is_accepted_with_its_predictions():
     assert np.allclose(plan.currents_a.real / CURRENT_LSB_A, np.round(plan.currents_a.real / CURRENT_LSB_A))
 
 
-def test_the_goals_ramp_time_is_used_but_never_below_the_device_minimum():
+def test_the_goals_ramp_time_is_used_but_never_below_the_device_minimum_for_a_goal():
     assert PLANNER.plan(PlateMotion.single(30, [5, 0, 0, 0, 0, 0], ramp_time_s=2.0)).ramp_s == 2.0
-    assert (
-        PLANNER.plan(PlateMotion.single(30, [5, 0, 0, 0, 0, 0], ramp_time_s=0.0)).ramp_s
-        == CFG.timing.min_ramp_s
-    )
+    assert CFG.timing.min_ramp_s < CFG.timing.min_goal_ramp_s == 0.2
+    for asked in (0.0, 0.05, 0.1):
+        ramp = PLANNER.plan(PlateMotion.single(30, [5, 0, 0, 0, 0, 0], ramp_time_s=asked)).ramp_s
+        assert ramp == CFG.timing.min_goal_ramp_s
 
 
 def test_the_table_has_rows_for_the_goals_third_order_distortion_products_where_the_device_allows():

@@ -84,4 +84,11 @@ S_CHUNK = 17        # configurations per parallel work item
 S_STARTS = 18       # rigid: number of initial twists compared
 S_MIN_STEPS = 19    # steps per period and harmonic at least (events hide in longer steps)
 S_LONG = 20         # 1: long chunks (>= CHUNK_LARGE): cubic extrapolation, the neighbour's rate prior
-S_SIZE = 21
+# Step-logic constants of _advance (EVENT_ERR_MAX, KAPPA_PER_STEP_TOL, KAPPA_DEPART_PER_STEP_TOL,
+# ZERO_PER_RTOL), passed in S by SolverSettings.vector so that a benchmark can compare values
+# without recompiling the kernels.
+S_EVENT_ERR_MAX = 21  # a trial step with a larger error norm is shrunk without looking for events
+S_KAPPA = 22        # point: PP_KAPPA in velocity step tolerances
+S_KAPPA_DEPART = 23  # point: PP_KAPPA_DEPART in velocity step tolerances
+S_ZERO_PER_RTOL = 24  # zero tolerance: this many rtol times the velocity scale (plus zero_velocity_rtol)
+S_SIZE = 25

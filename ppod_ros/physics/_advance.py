@@ -45,6 +45,7 @@ from ppod_ros.physics._layout import (
     PP_EVOLVE,
     PP_KAPPA,
     PP_KAPPA_DEPART,
+    PP_LAG_MAX,
     PP_MU,
     PP_MUS,
     PP_X,
@@ -62,6 +63,7 @@ from ppod_ros.physics._layout import (
     S_EXPONENT,
     S_KAPPA,
     S_KAPPA_DEPART,
+    S_LAG_MAX,
     S_MIN_STEPS,
     S_RTOL,
     S_ZERO_PER_RTOL,
@@ -103,16 +105,22 @@ KAPPA_DEPART_PER_STEP_TOL = 1e4
 #: (``S_EVENT_ERR_MAX``): no event location on a step this far off. Lower values were measured and
 #: not taken (10: LineSinkXPlant 141 -> 123 steps and re-steps per period, Stick2D 129 -> 137).
 EVENT_ERR_MAX = 1e3
+#: Largest lag (rad) of a slip leaving zero behind -a_h taken from the first-order slow manifold
+#: (``_contact.point_rhs``; ``PP_LAG_MAX``): the expansion is in |w| psi' / |a_h|, far below this in
+#: the departure band. 0 slides along -a_h itself (the tests compare).
+LAG_MAX_RAD = 0.1
 
 
 @njit(cache=True, error_model="numpy")
 def point_speed_limits(P, S, step_tol, period):
     """Set a point part's PP_KAPPA and PP_KAPPA_DEPART (m/s) from its velocity step tolerance (m/s)
     and S (``S_KAPPA``, ``S_KAPPA_DEPART``: KAPPA_PER_STEP_TOL and KAPPA_DEPART_PER_STEP_TOL from
-    ``SolverSettings.vector``), and PP_CAPTURE_M: the position error (m) an early capture may make,
-    one step tolerance of the period's average velocity (see :func:`_point_capture`)."""
+    ``SolverSettings.vector``), PP_LAG_MAX (rad, ``S_LAG_MAX``: LAG_MAX_RAD), and PP_CAPTURE_M: the
+    position error (m) an early capture may make, one step tolerance of the period's average
+    velocity (see :func:`_point_capture`)."""
     P[PP_KAPPA] = S[S_KAPPA] * step_tol
     P[PP_KAPPA_DEPART] = S[S_KAPPA_DEPART] * step_tol
+    P[PP_LAG_MAX] = S[S_LAG_MAX]
     P[PP_CAPTURE_M] = step_tol * period
 
 

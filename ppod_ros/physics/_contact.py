@@ -38,6 +38,7 @@ from ppod_ros.physics._layout import (
     PP_EVOLVE,
     PP_KAPPA,
     PP_KAPPA_DEPART,
+    PP_LAG_MAX,
     PP_MU,
     PP_X,
     PP_Y,
@@ -66,10 +67,6 @@ from ppod_ros.physics._layout import (
     W_V,
 )
 from ppod_ros.physics.plate import G, plate_eval
-
-#: Largest lag (rad) of the slip behind -a_h taken from the first-order slow manifold (point_rhs):
-#: the expansion is in |w| psi' / |a_h|, far below this in the band it is used in.
-LAG_MAX_RAD = 0.1
 
 # ================================================================ point part
 # All work arrays are indexed by offset (see _layout): slicing numba arrays in hot loops costs
@@ -131,10 +128,10 @@ def point_rhs(mc, P, aux, t, y, K, s, W):
             ux = -ahx / a
             uy = -ahy / a
             lag = -nw * accel_turn_rate(mc, t, x, yy, ahx, ahy) / (2.0 * a - f)
-            if lag > LAG_MAX_RAD:
-                lag = LAG_MAX_RAD
-            elif lag < -LAG_MAX_RAD:
-                lag = -LAG_MAX_RAD
+            if lag > P[PP_LAG_MAX]:
+                lag = P[PP_LAG_MAX]
+            elif lag < -P[PP_LAG_MAX]:
+                lag = -P[PP_LAG_MAX]
             cl = math.cos(lag)
             sl = math.sin(lag)
             K[s, 2] = -f * (cl * ux - sl * uy)

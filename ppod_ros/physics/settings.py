@@ -208,6 +208,7 @@ class SolverSettings:
         S[lay.S_KAPPA] = _advance.KAPPA_PER_STEP_TOL
         S[lay.S_KAPPA_DEPART] = _advance.KAPPA_DEPART_PER_STEP_TOL
         S[lay.S_ZERO_PER_RTOL] = _advance.ZERO_PER_RTOL
+        S[lay.S_LAG_MAX] = _advance.LAG_MAX_RAD
         return S
 
     def chunk_for(self, n_configs: int) -> int:

@@ -5,7 +5,7 @@ import numpy as np
 from ppod_bench.fixed_step_reference import reference_average
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart
-from ppod_ros.physics import SolverSettings, solve_field
+from ppod_ros.physics import SolverSettings, _advance, solve_field
 from ppod_ros.physics import _layout as lay
 from ppod_ros.physics._contact import accel_turn_rate
 from ppod_ros.physics.plate import motion_table, plate_eval
@@ -97,19 +97,24 @@ def test_two_d_break_aways_slide_along_minus_a_h_at_first_and_agree_with_the_ref
             assert np.abs(ref - r.velocity[i]).max() < 1.5e-6, (mu_static, x, y, ref, r.velocity[i])
 
 
-def test_the_slip_leaving_zero_lags_minus_a_h_as_the_slow_manifold_says():
+def test_the_slip_leaving_zero_lags_minus_a_h_as_the_slow_manifold_says(monkeypatch):
     """After a break-away the friction follows -a_h turned by the slip's first-order lag
-    -|w| psi' / (2 |a_h| - mu n) up to KAPPA_DEPART_PER_STEP_TOL = 1e4 step tolerances: without the
-    lag that band was off by up to 9.3e-7 m/s on the suite's Stick2D configurations; with it the
-    field is within 2e-7 m/s of the reference. The turn rate psi' comes from the harmonics'
-    derivatives and equals the finite-difference turn of a_h."""
+    -|w| psi' / (2 |a_h| - mu n) up to KAPPA_DEPART_PER_STEP_TOL = 1e4 step tolerances: the field is
+    within 1e-7 m/s of the reference, where -a_h itself (LAG_MAX_RAD = 0) is off by 5e-7 to 9e-7.
+    The turn rate psi' comes from the harmonics' derivatives and equals the finite-difference turn
+    of a_h."""
     m = suite_motion("Stick2D")
-    pts = [(0.0, 0.0), (-0.06, 0.02), (0.04, -0.08), (0.08, 0.06)]
-    r = solve_field(m, PointPart(0.3), pts, SolverSettings(cache=False))
-    assert r.valid.all() and (r.stick_fraction > 0.05).all()
-    for i, (x, y) in enumerate(pts):
-        ref, _ = reference_average(m, 0.3, x, y, start=r.cycle_start[i])
-        assert np.abs(ref - r.velocity[i]).max() < 2e-7, (x, y, ref, r.velocity[i])
+    pts = [(-0.052, 0.084), (-0.032, 0.036), (0.052, 0.1), (0.0, 0.0)]
+
+    def errors():
+        r = solve_field(m, PointPart(0.3), pts, SolverSettings(cache=False))
+        assert r.valid.all() and (r.stick_fraction > 0.05).all()
+        return [np.abs(reference_average(m, 0.3, x, y, start=r.cycle_start[i])[0] - r.velocity[i]).max()
+                for i, (x, y) in enumerate(pts)]
+
+    assert max(errors()) < 1e-7
+    monkeypatch.setattr(_advance, "LAG_MAX_RAD", 0.0)
+    assert max(errors()) > 4e-7
     for name in ("Stick2D", "Swirl3H"):
         motion = suite_motion(name)
         mc = motion_table(motion)

@@ -45,6 +45,7 @@ from ppod_ros.physics._layout import (
     PP_EVOLVE,
     PP_KAPPA,
     PP_KAPPA_DEPART,
+    PP_LAG_MAX,
     PP_MU,
     PP_MUS,
     PP_X,
@@ -58,9 +59,14 @@ from ppod_ros.physics._layout import (
     S_ATOL_V,
     S_CAPTURE,
     S_ERRKIND,
+    S_EVENT_ERR_MAX,
     S_EXPONENT,
+    S_KAPPA,
+    S_KAPPA_DEPART,
+    S_LAG_MAX,
     S_MIN_STEPS,
     S_RTOL,
+    S_ZERO_PER_RTOL,
     S_ZERO_RTOL,
     SLIDE,
     STEP_LIMIT,
@@ -76,25 +82,45 @@ from ppod_ros.physics._layout import (
 from ppod_ros.physics._rk import rk_step
 from ppod_ros.physics.plate import G, plate_eval
 
+#: Relative speeds below this many times rtol x the velocity scale (plus ``zero_velocity_rtol``)
+#: count as zero (``S_ZERO_PER_RTOL``, :func:`zero_tolerance`).
+ZERO_PER_RTOL = 10.0
 #: Relative speeds below this many velocity step tolerances are "just leaving zero" or "about to
 #: stick" (``PP_KAPPA``): following w / |w| there would take ever shorter steps for a change in
-#: velocity below it.
-KAPPA_PER_STEP_TOL = 100.0
-#: After a departure from w = 0 (a break-away, a pass through zero), the slip slides along -a_h up
-#: to this many step tolerances (``PP_KAPPA_DEPART``). Its direction then lags -a_h by an angle of
-#: order |w| |d(a_h/|a_h|)/dt| / (mu n): small while |w| is, yet w / |w| makes that phase stiff
-#: (rate mu n / |w|), so it took most of the steps of a period with long sticking (Stick2D: 70 of
-#: 167). Measured against the fixed-step reference (docs/solver.md).
-KAPPA_DEPART_PER_STEP_TOL = 1000.0
+#: velocity below it. Without a departure from zero (AX_DEPART) this band also catches a slip that
+#: only swings past zero (nearly collinear motions) and turns its friction to -a_h before the
+#: reversal: an error of order the band per reversal. At 100 tolerances LineSinkXPlant was off by
+#: up to 2.3e-6 m/s against the fixed-step reference, at 10 by 4.3e-7, in fewer steps (S_KAPPA).
+KAPPA_PER_STEP_TOL = 10.0
+#: After a departure from w = 0 (a break-away, a pass through zero), the slip slides along -a_h,
+#: turned by its first-order lag (``_contact.point_rhs``), up to this many step tolerances
+#: (``PP_KAPPA_DEPART``); a slip about to stick may be captured up to the same speed
+#: (:func:`_point_capture`). w / |w| makes that phase stiff (rate |a_h| / |w|), so it took most of
+#: the steps of a period with long sticking (Stick2D: 70 of 167 at 100 tolerances). Along -a_h
+#: alone 1000 was the limit (1e4 was off by 9.3e-7 m/s on Stick2D); with the lag 1e4 stays within
+#: 1.2e-8 m/s of the fixed-step reference (3e4: 5.4e-8, 1e5: 1.7e-6) in 97 instead of 122 steps per
+#: period (docs/solver.md).
+KAPPA_DEPART_PER_STEP_TOL = 1e4
+#: A trial step whose error norm exceeds this is shrunk at once, without looking for an event in it
+#: (``S_EVENT_ERR_MAX``): no event location on a step this far off. Lower values were measured and
+#: not taken (10: LineSinkXPlant 141 -> 123 steps and re-steps per period, Stick2D 129 -> 137).
+EVENT_ERR_MAX = 1e3
+#: Largest lag (rad) of a slip leaving zero behind -a_h taken from the first-order slow manifold
+#: (``_contact.point_rhs``; ``PP_LAG_MAX``): the expansion is in |w| psi' / |a_h|, far below this in
+#: the departure band. 0 slides along -a_h itself (the tests compare).
+LAG_MAX_RAD = 0.1
 
 
 @njit(cache=True, error_model="numpy")
-def point_speed_limits(P, step_tol, period):
-    """Set a point part's PP_KAPPA and PP_KAPPA_DEPART (m/s) from its velocity step tolerance (m/s),
-    and PP_CAPTURE_M: the position error (m) an early capture may make, one step tolerance of the
-    period's average velocity (see :func:`_point_capture`)."""
-    P[PP_KAPPA] = KAPPA_PER_STEP_TOL * step_tol
-    P[PP_KAPPA_DEPART] = KAPPA_DEPART_PER_STEP_TOL * step_tol
+def point_speed_limits(P, S, step_tol, period):
+    """Set a point part's PP_KAPPA and PP_KAPPA_DEPART (m/s) from its velocity step tolerance (m/s)
+    and S (``S_KAPPA``, ``S_KAPPA_DEPART``: KAPPA_PER_STEP_TOL and KAPPA_DEPART_PER_STEP_TOL from
+    ``SolverSettings.vector``), PP_LAG_MAX (rad, ``S_LAG_MAX``: LAG_MAX_RAD), and PP_CAPTURE_M: the
+    position error (m) an early capture may make, one step tolerance of the period's average
+    velocity (see :func:`_point_capture`)."""
+    P[PP_KAPPA] = S[S_KAPPA] * step_tol
+    P[PP_KAPPA_DEPART] = S[S_KAPPA_DEPART] * step_tol
+    P[PP_LAG_MAX] = S[S_LAG_MAX]
     P[PP_CAPTURE_M] = step_tol * period
 
 
@@ -103,7 +129,7 @@ def zero_tolerance(S, vscale):
     """Relative speeds below this count as zero (m/s): below what the integration can resolve
     (10 rtol times the velocity scale), so that numerical noise off an exactly symmetric motion
     is not mistaken for a slide past zero that must be resolved step by step."""
-    return (S[S_ZERO_RTOL] + 10.0 * S[S_RTOL]) * vscale + 1e-3 * S[S_ATOL_V]
+    return (S[S_ZERO_RTOL] + S[S_ZERO_PER_RTOL] * S[S_RTOL]) * vscale + 1e-3 * S[S_ATOL_V]
 
 
 # ------------------------------------------------------------------ point part
@@ -491,7 +517,7 @@ def advance(kind, mc, P, aux, t0, t1, y, h, period, A, B, C, E, E3, S, K, ytmp, 
             return st, h
         # Events first: a step across an event straddles a kink of the right-hand side, so its
         # error estimate says nothing about the step up to the event.
-        if err > 1e3:
+        if err > S[S_EVENT_ERR_MAX]:
             # Far off (a stiff band entered with a long step, say): no event location on garbage.
             h = 0.2 * hh
             continue

@@ -38,6 +38,7 @@ from ppod_ros.physics._layout import (
     PP_EVOLVE,
     PP_KAPPA,
     PP_KAPPA_DEPART,
+    PP_LAG_MAX,
     PP_MU,
     PP_X,
     PP_Y,
@@ -72,6 +73,26 @@ from ppod_ros.physics.plate import G, plate_eval
 # reference counting. Stage derivatives go to K[s, :].
 
 
+@njit(cache=True, error_model="numpy")
+def accel_turn_rate(mc, t, x, y, ahx, ahy):
+    """Rate (rad/s) at which the horizontal plate acceleration a_h = (ahx, ahy) at plate point (x, y)
+    turns at time t: (a_h x a_h') / |a_h|^2, with a_h' from the harmonics' derivatives."""
+    jx = 0.0
+    jy = 0.0
+    jz = 0.0
+    for r in range(mc.shape[0]):
+        om = mc[r, 0]
+        s = math.sin(om * t)
+        c = math.cos(om * t)
+        jx += om * (mc[r, 1] * c - mc[r, 7] * s)
+        jy += om * (mc[r, 2] * c - mc[r, 8] * s)
+        jz += om * (mc[r, 6] * c - mc[r, 12] * s)
+    jhx = jx - jz * y
+    jhy = jy + jz * x
+    a2 = ahx * ahx + ahy * ahy
+    return (ahx * jhy - ahy * jhx) / a2 if a2 > 0.0 else 0.0
+
+
 @njit(cache=True, error_model="numpy", inline="always")
 def point_rhs(mc, P, aux, t, y, K, s, W):
     plate_eval(mc, t, W, W_U, W_V)
@@ -100,8 +121,21 @@ def point_rhs(mc, P, aux, t, y, K, s, W):
             # Following w/|w| at speeds this small would take ever shorter steps (the direction
             # is singular at 0) for a change in velocity below kappa; after a departure from zero
             # (AX_DEPART) up to the larger PP_KAPPA_DEPART (_advance.KAPPA_DEPART_PER_STEP_TOL).
-            K[s, 2] = -f * (-ahx / a)
-            K[s, 3] = -f * (-ahy / a)
+            # On the slow manifold of w/|w| the slip lags -a_h by -|w| psi' / (2 |a_h| - mu n) to
+            # first order in |w| (psi': the turn rate of a_h): that is where w/|w| itself sits once
+            # its fast relaxation (rate |a_h| / |w|) is over, so the hand-over to w/|w| starts no
+            # stiff transient (docs/solver.md).
+            ux = -ahx / a
+            uy = -ahy / a
+            lag = -nw * accel_turn_rate(mc, t, x, yy, ahx, ahy) / (2.0 * a - f)
+            if lag > P[PP_LAG_MAX]:
+                lag = P[PP_LAG_MAX]
+            elif lag < -P[PP_LAG_MAX]:
+                lag = -P[PP_LAG_MAX]
+            cl = math.cos(lag)
+            sl = math.sin(lag)
+            K[s, 2] = -f * (cl * ux - sl * uy)
+            K[s, 3] = -f * (sl * ux + cl * uy)
             return OK if n > 0.0 else CONTACT_LOST
         if nw > 0.0:
             # Continued direction: w with its component against d reflected (see the module doc).

@@ -64,7 +64,7 @@ def advance_part(i, kind, mc, Pall, Y, AUX, H, t0, t1, T, kmax, A, B, C, E, E3, 
         P[PP_CANSTICK] = 1.0
         sc[2] = S[S_RTOL] * vscale + S[S_ATOL_V]
         sc[3] = sc[2]
-        point_speed_limits(P, sc[2], T)
+        point_speed_limits(P, S, sc[2], T)
     else:
         rigid_geometry(P, y[2], W)
         vscale, wscale = rigid_scales(mc, P, y[0], y[1], W)

@@ -22,7 +22,8 @@ PP_MU, PP_MUS, PP_X, PP_Y, PP_EVOLVE, PP_CANSTICK, PP_VSCALE = 0, 1, 2, 3, 4, 5,
 PP_KAPPA = 7      # relative speeds below this are "just leaving" or "about to stick" (m/s)
 PP_KAPPA_DEPART = 8  # a slip that has just left zero slides along -a_h up to this speed (m/s)
 PP_CAPTURE_M = 9  # a slip about to stick is captured early while the position error stays below this (m)
-PP_SIZE = 10
+PP_LAG_MAX = 10   # largest slow-manifold lag of a slip leaving zero (rad; 0: slide along -a_h)
+PP_SIZE = 11
 
 # ---- rigid part parameters P (per configuration) ------------------------------------------------
 RP_MASS = 0
@@ -84,4 +85,12 @@ S_CHUNK = 17        # configurations per parallel work item
 S_STARTS = 18       # rigid: number of initial twists compared
 S_MIN_STEPS = 19    # steps per period and harmonic at least (events hide in longer steps)
 S_LONG = 20         # 1: long chunks (>= CHUNK_LARGE): cubic extrapolation, the neighbour's rate prior
-S_SIZE = 21
+# Step-logic constants of _advance (EVENT_ERR_MAX, KAPPA_PER_STEP_TOL, KAPPA_DEPART_PER_STEP_TOL,
+# ZERO_PER_RTOL, LAG_MAX_RAD), passed in S by SolverSettings.vector so that a benchmark can compare values
+# without recompiling the kernels.
+S_EVENT_ERR_MAX = 21  # a trial step with a larger error norm is shrunk without looking for events
+S_KAPPA = 22        # point: PP_KAPPA in velocity step tolerances
+S_KAPPA_DEPART = 23  # point: PP_KAPPA_DEPART in velocity step tolerances
+S_ZERO_PER_RTOL = 24  # zero tolerance: this many rtol times the velocity scale (plus zero_velocity_rtol)
+S_LAG_MAX = 25     # point: PP_LAG_MAX (rad)
+S_SIZE = 26

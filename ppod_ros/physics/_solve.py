@@ -492,7 +492,7 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C,
         if kind == 1:
             P[RP_ZTOL] = max(zero_tol, 100.0 * sc[3])
         else:
-            point_speed_limits(P, sc[2], T)
+            point_speed_limits(P, S, sc[2], T)
         # Starting guess: the caller's, else the neighbour's limit cycle (extrapolated by the
         # polynomial through the last converged neighbours while they and this configuration are
         # evenly spaced, as along a grid row: two points, in long chunks up to four), else rest.

@@ -71,7 +71,7 @@ def limit_cycle(motion: PlateMotion, part: PointPart | RigidPart, config: Any, n
         vscale = point_velocity_scale(mc, cfg[0, 0], cfg[0, 1])
         P[lay.PP_VSCALE] = vscale
         sc[2:] = rtol * vscale + settings.atol_mps
-        point_speed_limits(P, sc[2], T)
+        point_speed_limits(P, S, sc[2], T)
     else:
         P = rigid_rows(part, cfg, settings.friction_eps_mps)[0]
         rigid_geometry(P, cfg[0, 2], W)

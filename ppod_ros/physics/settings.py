@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ppod_ros.errors import ConfigError
+from ppod_ros.physics import _advance
 from ppod_ros.physics import _layout as lay
 from ppod_ros.physics._rk import INTEGRATORS
 
@@ -203,6 +204,11 @@ class SolverSettings:
         S[lay.S_CHUNK] = self.chunk or CHUNK_SMALL
         S[lay.S_STARTS] = self.rigid_starts
         S[lay.S_MIN_STEPS] = self.min_steps_per_period
+        S[lay.S_EVENT_ERR_MAX] = _advance.EVENT_ERR_MAX
+        S[lay.S_KAPPA] = _advance.KAPPA_PER_STEP_TOL
+        S[lay.S_KAPPA_DEPART] = _advance.KAPPA_DEPART_PER_STEP_TOL
+        S[lay.S_ZERO_PER_RTOL] = _advance.ZERO_PER_RTOL
+        S[lay.S_LAG_MAX] = _advance.LAG_MAX_RAD
         return S
 
     def chunk_for(self, n_configs: int) -> int:

@@ -14,6 +14,7 @@ import csv
 import io
 import json
 import math
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -335,9 +336,19 @@ def read_recording(path: str | Path) -> AccelRecording:
 
 
 def write_recording(recording: AccelRecording, path: str | Path) -> Path:
-    """Write a recording (.npz: everything; .csv: samples or summaries without commands and goal)."""
+    """Write a recording (.npz: everything; .csv: samples or summaries without commands and goal).
+
+    Atomic: written to a hidden file beside ``path`` and renamed, so a reader watching the directory
+    never opens a half-written recording (a test reading a raw capture as soon as it appeared got a
+    truncated zip), and a failed write leaves no file at ``path``."""
     path = Path(path)
-    _lookup(WRITERS, path, "writer")(recording, path)
+    writer = _lookup(WRITERS, path, "writer")
+    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
+    try:
+        writer(recording, tmp)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return path
 
 

@@ -140,6 +140,28 @@ def test_sample_recordings_round_trip_and_estimate_per_segment(tmp_path, suffix)
     assert _error(est) < 2e-5
 
 
+def test_a_recording_appears_whole_or_not_at_all(tmp_path, monkeypatch):
+    """A reader watching the directory (ppod/capture_raw's test did) never opens a half-written file:
+    the writer fills a hidden file beside it and renames it; a failed write leaves nothing."""
+    rec = _sample_recording(with_extras=True)
+    seen = []
+
+    def failing(recording, path):
+        seen.append(path)
+        path.write_bytes(b"PK\x03\x04 half a zip")
+        raise OSError("disk full")
+
+    from ppod_ros.estimation import recording as module
+
+    monkeypatch.setitem(module.WRITERS, ".npz", failing)
+    with pytest.raises(OSError):
+        write_recording(rec, tmp_path / "raw_1.npz")
+    assert list(tmp_path.iterdir()) == [] and seen[0].name.startswith(".") and seen[0].parent == tmp_path
+    monkeypatch.undo()
+    out = write_recording(rec, tmp_path / "raw_1.npz")
+    assert [p.name for p in tmp_path.iterdir()] == ["raw_1.npz"] and read_recording(out).goal == GOAL
+
+
 @pytest.mark.parametrize("suffix", [".npz", ".csv"])
 def test_summary_recordings_round_trip(tmp_path, suffix):
     P = _cycle_summaries(cycles=4, seed=6)

@@ -296,11 +296,10 @@ def test_a_correction_is_judged_on_the_measured_plate_only_when_measured_on_the_
                                                  "limits.contact_margin_mps2"}
 
 
-def test_a_correction_during_a_goals_ramp_never_shortens_it():
-    """Found in the demo: the planner reversed a spin (alpha_z 312 -> 331 rad/s^2, opposite phase) and the
-    feedback's next correction arrived 16 ms into the goal's 0.5 s ramp. Sent with the 50 ms correction
-    ramp, it crossfaded from the mix playing (still the old motion) to the new one in 50 ms: the legs
-    overshot to 2.4 mm and the device faulted on stroke (limit 2 mm)."""
+@pytest.fixture
+def leg_rig():
+    """The simulated device of the demo's seed on the device's own clock, every firmware period's
+    largest leg displacement recorded as (end time, m) in ``legs``."""
     config = default_device_config().with_can(interface="virtual", channel=f"test-gen-{next(_channels)}")
     dev_bus, host_bus, spy = open_bus(config.can), open_bus(config.can), open_bus(config.can)
     device = SimDevice(config, dev_bus, seed=7)
@@ -314,69 +313,60 @@ def test_a_correction_during_a_goals_ramp_never_shortens_it():
         return check(current, voltage, leg, end_s)
 
     device._check_faults = watch
+    yield config, device, link, gen, spy, legs
+    for bus in (dev_bus, host_bus, spy):
+        bus.shutdown()
+
+
+def test_a_correction_during_a_goals_ramp_never_shortens_it(leg_rig):
+    """Found in the demo: the planner reversed a spin (alpha_z 312 -> 331 rad/s^2, opposite phase) and the
+    feedback's next correction arrived 16 ms into the goal's 0.5 s ramp. Sent with the 50 ms correction
+    ramp, it crossfaded from the mix playing (still the old motion) to the new one in 50 ms: the legs
+    overshot to 2.4 mm and the device faulted on stroke (limit 2 mm)."""
+    config, device, link, gen, spy, legs = leg_rig
     amp = [5.2, 8.4, 0.4, 12.8, 34.2, 312.0]
     one = PlateMotion.single(30, amp, [0.26, -0.44, -1.39, 0.33, -2.17, np.pi], name="mpc")
     other = PlateMotion.single(30, amp, [-3.11, 2.69, -1.57, 0.54, 0.81, 0.0], name="mpc")
-    try:
-        assert gen.submit(one).accepted
-        run(device, link, 1.5, gen)
-        steady = max(m for t, m in legs if t > device.time_s - 0.5)
-        drain(spy)
-        assert gen.submit(other).accepted
-        t_goal = device.time_s
-        run(device, link, 0.02, gen)
-        out = gen.apply_correction(None, np.array([1]), np.full((1, 6), 0.01 + 0j))
-        assert out.applied
-        ramps = _table_ramps(config, drain(spy))
-        # The goal's table (0.5 s), then the correction over what is left of it, not 50 ms.
-        assert ramps[0] == pytest.approx(config.timing.default_ramp_s, abs=1e-3)
-        assert ramps[-1] >= config.timing.default_ramp_s - (device.time_s - t_goal) - 1e-3
-        run(device, link, 1.5, gen)
-        assert device.state == DeviceState.ENABLED and not device.faults
-        during = max(m for t, m in legs if t > t_goal)
-        assert during <= 1.05 * steady < config.limits.leg_stroke_m
-        # After the ramp a correction is crossfaded in over the short correction ramp again.
-        drain(spy)
-        assert gen.apply_correction(None, np.array([1]), np.full((1, 6), 0.02 + 0j)).applied
-        assert _table_ramps(config, drain(spy)) == [pytest.approx(config.timing.min_ramp_s, abs=1e-3)]
-    finally:
-        for bus in (dev_bus, host_bus, spy):
-            bus.shutdown()
+    assert gen.submit(one).accepted
+    run(device, link, 1.5, gen)
+    steady = max(m for t, m in legs if t > device.time_s - 0.5)
+    drain(spy)
+    assert gen.submit(other).accepted
+    t_goal = device.time_s
+    run(device, link, 0.02, gen)
+    out = gen.apply_correction(None, np.array([1]), np.full((1, 6), 0.01 + 0j))
+    assert out.applied
+    ramps = _table_ramps(config, drain(spy))
+    # The goal's table (0.5 s), then the correction over what is left of it, not 50 ms.
+    assert ramps[0] == pytest.approx(config.timing.default_ramp_s, abs=1e-3)
+    assert ramps[-1] >= config.timing.default_ramp_s - (device.time_s - t_goal) - 1e-3
+    run(device, link, 1.5, gen)
+    assert device.state == DeviceState.ENABLED and not device.faults
+    during = max(m for t, m in legs if t > t_goal)
+    assert during <= 1.05 * steady < config.limits.leg_stroke_m
+    # After the ramp a correction is crossfaded in over the short correction ramp again.
+    drain(spy)
+    assert gen.apply_correction(None, np.array([1]), np.full((1, 6), 0.02 + 0j)).applied
+    assert _table_ramps(config, drain(spy)) == [pytest.approx(config.timing.min_ramp_s, abs=1e-3)]
 
 
 @pytest.mark.parametrize("reverse", [False, True])
-def test_a_goal_asking_for_a_50_ms_ramp_is_crossfaded_slowly_enough_for_the_legs(reverse):
+def test_a_goal_asking_for_a_50_ms_ramp_is_crossfaded_slowly_enough_for_the_legs(reverse, leg_rig):
     """Crossfaded in 50 ms, a spin at 61 % of the legs' stroke overshot its steady stroke by 37 % from
     rest and by 80 % reversed (the device faulted); timing.min_goal_ramp_s (0.2 s) bounds it."""
-    config = default_device_config().with_can(interface="virtual", channel=f"test-gen-{next(_channels)}")
-    dev_bus, host_bus = open_bus(config.can), open_bus(config.can)
-    device = SimDevice(config, dev_bus, seed=7)
-    link = DeviceLink(host_bus, config, clock=lambda: device.time_s)
-    gen = WaveformGenerator(link, GoalPlanner(config))
-    legs = []
-    check = device._check_faults
-
-    def watch(current, voltage, leg, end_s):
-        legs.append((end_s, float(np.max(np.abs(leg)))))
-        return check(current, voltage, leg, end_s)
-
-    device._check_faults = watch
+    config, device, link, gen, _, legs = leg_rig
     amp = [5.2, 8.4, 0.4, 12.8, 34.2, 312.0]
     phase = np.array([0.26, -0.44, -1.39, 0.33, -2.17, np.pi])
-    try:
-        run(device, link, 0.3, gen)
-        if reverse:
-            assert gen.submit(PlateMotion.single(30, amp, phase, name="one")).accepted
-            run(device, link, 1.5, gen)
-        out = gen.submit(PlateMotion.single(30, amp, phase + (np.pi if reverse else 0.0), name="fast",
-                                            ramp_time_s=0.05))
-        assert out.accepted and out.plan.ramp_s == pytest.approx(config.timing.min_goal_ramp_s)
-        t_goal = device.time_s
+    run(device, link, 0.3, gen)
+    if reverse:
+        assert gen.submit(PlateMotion.single(30, amp, phase, name="one")).accepted
         run(device, link, 1.5, gen)
-        steady = max(m for t, m in legs if t > device.time_s - 0.5)
-        during = max(m for t, m in legs if t > t_goal)
-        assert device.state == DeviceState.ENABLED and not device.faults
-        assert during <= 1.03 * steady
-    finally:
-        for bus in (dev_bus, host_bus):
-            bus.shutdown()
+    out = gen.submit(PlateMotion.single(30, amp, phase + (np.pi if reverse else 0.0), name="fast",
+                                        ramp_time_s=0.05))
+    assert out.accepted and out.plan.ramp_s == pytest.approx(config.timing.min_goal_ramp_s)
+    t_goal = device.time_s
+    run(device, link, 1.5, gen)
+    steady = max(m for t, m in legs if t > device.time_s - 0.5)
+    during = max(m for t, m in legs if t > t_goal)
+    assert device.state == DeviceState.ENABLED and not device.faults
+    assert during <= 1.03 * steady

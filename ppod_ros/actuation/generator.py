@@ -168,7 +168,7 @@ class WaveformGenerator:
                 self.last_rejection = outcome
                 return outcome
             self._active = _Active(plan, {seq}, np.zeros_like(plan.currents_a), last_seq=seq)
-            self._ramp_for(self._active, plan.ramp_s)
+            self._ramp_started(self._active, plan.ramp_s)
             self._pending = {seq: _Pending(plan.currents_a, plan.frequency_hz, plan.ramp_s, self.link.clock(),
                                            None, None)}
             self._failed = None
@@ -231,7 +231,7 @@ class WaveformGenerator:
             except (ConfigError, LimitError) as exc:
                 return CorrectionOutcome(False, str(exc))
             ramp = self._ramp_for(act, max(act.plan.ramp_s, self.config.timing.min_ramp_s) if first
-                                  else self.config.timing.min_ramp_s, commit=False)
+                                  else self.config.timing.min_ramp_s)
             try:
                 seq = self.link.send_correction(act.plan, result, ramp_s=ramp)
             except DeviceError as exc:
@@ -241,7 +241,7 @@ class WaveformGenerator:
             act.seqs.add(seq)
             act.last_seq = seq
             act.correction_a = result.applied_a
-            self._ramp_for(act, ramp)
+            self._ramp_started(act, ramp)
             notes = []
             if result.blocked_rows:
                 notes.append(f"no correction at harmonics {list(result.blocked_rows)} (forbidden frequencies)")
@@ -253,17 +253,17 @@ class WaveformGenerator:
             self.last_correction_note = "; ".join(notes)
             return CorrectionOutcome(True, self.last_correction_note, result, seq)
 
-    def _ramp_for(self, act: _Active, ramp_s: float, commit: bool = True) -> float:
+    def _ramp_for(self, act: _Active, ramp_s: float) -> float:
         """The ramp for a table of ``act`` sent now: ``ramp_s``, or longer if the ramp under way ends
         later. A new table's crossfade starts from the mix playing (docs/can_protocol.md), so a short
         one would finish the goal's crossfade in its place: a reversal of a large motion in 0.05 s
-        instead of 0.5 s. ``commit``: the table is sent, its ramp is the one under way from now (the
-        device starts it at the next cycle start at the latest, one period of margin)."""
-        now = self.link.clock()
-        ramp = max(float(ramp_s), act.ramp_end_s - now)
-        if commit:
-            act.ramp_end_s = now + ramp + 1.0 / act.plan.frequency_hz
-        return ramp
+        instead of 0.5 s."""
+        return max(float(ramp_s), act.ramp_end_s - self.link.clock())
+
+    def _ramp_started(self, act: _Active, ramp_s: float) -> None:
+        """A table of ``act`` was sent with ``ramp_s``: its ramp is the one under way from now (the
+        device starts it at the next cycle start at the latest: one period of margin)."""
+        act.ramp_end_s = self.link.clock() + ramp_s + 1.0 / act.plan.frequency_hz
 
     # ------------------------------------------------------------------ the ways down
     def stop(self, ramp_s: float | None = None) -> int:
@@ -369,7 +369,7 @@ class WaveformGenerator:
             try:
                 if self.link.status.state not in (DeviceState.ENABLED, DeviceState.RAMPING):
                     self.link.enable()
-                ramp = pending.ramp_s if stopping else self._ramp_for(act, pending.ramp_s, commit=False)
+                ramp = pending.ramp_s if stopping else self._ramp_for(act, pending.ramp_s)
                 new = self.link.send_table(pending.currents_a, pending.frequency_hz, ramp)
             except DeviceError as exc:
                 why = f"{why}; resend failed: {exc}"
@@ -383,7 +383,8 @@ class WaveformGenerator:
                 else:
                     act.seqs.add(new)
                     act.last_seq = new
-                    pending.ramp_s = self._ramp_for(act, ramp)
+                    pending.ramp_s = ramp
+                    self._ramp_started(act, ramp)
                 return
         if stopping:
             # The stop table did not get through: disabling ramps the plate down as well.

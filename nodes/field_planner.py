@@ -24,16 +24,26 @@ Interfaces (names in ppod_nodes.common.topics):
   ppod/stop        (client)                ramp the plate down when a task ends or is cancelled
 
 One MovePart or MoveParts goal runs at a time (a field moves every part on the plate); a new goal is rejected
-while one runs. The Task steps in the pose subscription's callback, a SensorlessTask in a 10 Hz
-timer (device time under ``ppod up --sim``: use_sim_time); the action's execute coroutine only
-waits for the outcome, so the single-threaded executor never blocks on it.
+while one runs. A closed-loop task (Task, MultiTask) steps on one planning thread, started from the
+pose subscription's callback (a frame arriving while a step is computed is skipped: the next step
+takes the newest poses); the executor thread applies each finished step (publishes its motion and
+feedback), so it keeps serving poses, cancels and services while the planner thinks. A
+SensorlessTask steps in a 10 Hz timer (device time under ``ppod up --sim``: use_sim_time). The
+action's execute coroutine only waits for the outcome.
+Plan lease: a MoveParts motion was planned on the poses of one frame. While the next plan is
+computed, every frame checks how old those poses are; past ``plan_lease_s`` (device time, from the
+pose stamps) the plate is stopped (a zero motion: at rest it holds every part), the late plan is
+dropped when it comes, and the task replans from rest. A busy or stalled host then costs time,
+never a part carried off by a stale motion.
 Diagnostics: the last design (kind, R^2, seconds) and the running task (phase, errors).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -56,6 +66,7 @@ from ppod_nodes.common.runner import make_main
 from ppod_ros.config.fields import Fields, load_yaml_file
 from ppod_ros.device import load_device_config
 from ppod_ros.errors import ConfigError, PpodError
+from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import Footprint, PointPart, part_from_dict, part_from_yaml_text
 from ppod_ros.planning import FieldSpec, SensorlessTask, Task, design_field, plan_sensorless
 from ppod_ros.planning.mpc import MultiTask, PartGoal, base_design, base_kinds
@@ -154,12 +165,15 @@ class _RunningTask:
         self.multi = multi      # a MoveParts goal (a MovePart goal may run a MultiTask of one part too)
         self.labels: list[str | None] = [None] * len(ids)   # per row, as last seen
         self.last_xy: list[tuple[float, float] | None] = [None] * len(ids)
+        self.stopped_at: float | None = None       # the lease stopped the plate at this device time
+        self.stopped_poses: np.ndarray | None = None
+        self.lease_stops = 0
 
 
 class FieldPlannerNode(PpodLifecycleNode):
     # Read per request from self.params, so a change applies to the next request (nodes/common/lifecycle.py).
     RUNTIME_PARAMS = ("frequency_hz", "num_frequencies", "position_tolerance_m", "orientation_tolerance_deg",
-                      "timeout_s", "stop_when_done")
+                      "timeout_s", "stop_when_done", "plan_lease_s")
     PARAMS = (
         Param("device_config", "", "device description YAML; empty: the packaged default (docs/device.md)"),
         Param("tracker_config", "", "tracker file naming the part types (label -> part model); "
@@ -171,6 +185,9 @@ class FieldPlannerNode(PpodLifecycleNode):
         Param("orientation_tolerance_deg", 2.0, "default MovePart orientation tolerance (deg)", min_value=0.01),
         Param("timeout_s", 60.0, "default MovePart timeout (device-clock s)", min_value=1.0),
         Param("stop_when_done", True, "ramp the plate down when a MovePart goal ends (parts stay put)"),
+        Param("plan_lease_s", 1.0, "device time a MoveParts motion may play past the poses it was planned on "
+                                   "while the next plan is computed; then the plate stops until it comes",
+              min_value=0.1, max_value=10.0),
     )
 
     def __init__(self, **kwargs):
@@ -179,6 +196,10 @@ class FieldPlannerNode(PpodLifecycleNode):
         self.models: dict[str, Any] = {}
         self.running: _RunningTask | None = None
         self._poses: PartPoseArray | None = None
+        # Closed-loop steps run on one planning thread; the executor applies their results.
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
+        self._pending: tuple[_RunningTask, float, Any] | None = None
+        self._step_done = self.create_guard_condition(self._on_step_done)
         self.goal_pub = self.create_lifecycle_publisher(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
         self.target_pub = self.create_publisher(PartPoseArray, topics.MOVE_PART_TARGET, qos.LATCHED)  # drawn by viz
         self.progress_pub = self.create_publisher(PlannerProgress, topics.PLANNER_PROGRESS, qos.STREAM)
@@ -210,6 +231,7 @@ class FieldPlannerNode(PpodLifecycleNode):
     def on_shutdown_node(self):
         if self.running is not None:
             self._finish(False, "the planner shut down")
+        self._worker.shutdown(wait=False, cancel_futures=True)
 
     # ------------------------------------------------------------------ PlanField
     def _frequency(self, requested: float) -> float | None:
@@ -424,10 +446,32 @@ class FieldPlannerNode(PpodLifecycleNode):
             self._step(run, self._now())
 
     def _step(self, run: _RunningTask, t_s: float) -> None:
-        """Step the running task at time ``t_s`` on the latest poses (rows in the task's part order)."""
+        """Step the running task at time ``t_s`` on the latest poses (rows in the task's part order).
+
+        A closed-loop task steps on the planning thread, so the executor keeps serving poses,
+        cancels and services while it plans; a frame that arrives while a step is computed is
+        skipped (the next step takes the newest poses) and checks the plan's lease."""
         if run.handle.is_cancel_requested:
             self._finish(False, "cancelled")
             return
+        poses = self._rows(run)
+        if isinstance(run.task, SensorlessTask):  # open loop on the clock: a lookup, never slow
+            self._apply(run, t_s, self._timed_step(run, t_s, poses))
+            return
+        if self._pending is not None:
+            self._check_lease(run, t_s, poses)
+            return
+        self._pending = (run, t_s, self._worker.submit(self._timed_step, run, t_s, poses))
+        self._pending[2].add_done_callback(self._signal_step_done)
+
+    def _signal_step_done(self, _future) -> None:
+        """On the planning thread: wake the executor to apply the step."""
+        # The node may have been destroyed while the step ran (rclpy's InvalidHandle): nothing to apply.
+        with contextlib.suppress(Exception):
+            self._step_done.trigger()
+
+    def _rows(self, run: _RunningTask) -> np.ndarray:
+        """The latest poses in the task's row order (NaN rows unseen); re-associates MoveParts tracks."""
         parts = self._poses.parts if self._poses is not None else []
         by_id = {int(p.id): p for p in parts if p.status != PartPose.STATUS_LOST}
         if run.multi:
@@ -439,14 +483,65 @@ class FieldPlannerNode(PpodLifecycleNode):
                 poses[row] = (p.pose.x, p.pose.y, p.pose.theta)
                 run.last_xy[row] = (p.pose.x, p.pose.y)
                 run.labels[row] = p.label
+        return poses
+
+    @staticmethod
+    def _timed_step(run: _RunningTask, t_s: float, poses: np.ndarray):
+        """The task's step (on the planning thread for closed-loop tasks): (step or the PpodError, ms)."""
         t0 = time.perf_counter()
         try:
-            step = run.task.step(t_s, poses)
+            out = run.task.step(t_s, poses)
         except PpodError as exc:
-            self._finish(False, f"planning failed: {exc}")
+            out = exc
+        return out, 1e3 * (time.perf_counter() - t0)
+
+    def _on_step_done(self) -> None:
+        """The planning thread finished a step: apply it on the executor thread (unless its task
+        ended meanwhile, or the lease stopped the plate while it was planned: then the plan, made on
+        poses from before the stop, is dropped and the task continues from rest)."""
+        if self._pending is None or not self._pending[2].done():
+            return
+        (run, t_s, future), self._pending = self._pending, None
+        if run is not self.running:
+            return
+        outcome = future.result()
+        if run.stopped_at is not None:
+            stopped_at, stopped_poses = run.stopped_at, run.stopped_poses
+            run.stopped_at = run.stopped_poses = None
+            if t_s < stopped_at and not isinstance(outcome[0], PpodError):
+                run.task.plate_stopped(stopped_at, stopped_poses)
+                self._apply(run, t_s, outcome, publish_motion=False)
+                return
+        self._apply(run, t_s, outcome)
+
+    def _check_lease(self, run: _RunningTask, t_s: float, poses: np.ndarray) -> None:
+        """While a MultiTask plans, the motion playing was planned at ``task.t_plan``: past
+        ``plan_lease_s`` of device time it is no longer a plan but a guess (the parts have moved on
+        under it), so the plate stops (at rest it holds every part) until the next plan."""
+        task = run.task
+        if not isinstance(task, MultiTask) or run.stopped_at is not None or task.current.is_zero():
+            return
+        age = t_s - task.t_plan
+        lease = float(self.params.get("plan_lease_s", 1.0))
+        if age <= lease:
+            return
+        rest = PlateMotion.zero(task.current.frequency_hz, name="rest")
+        self.goal_pub.publish(motion_to_msg(rest, self.get_clock().now().to_msg()))
+        run.last_motion_key = rest.key
+        run.stopped_at, run.stopped_poses = t_s, poses.copy()
+        run.lease_stops += 1
+        self.get_logger().warning(
+            f"replanning is late: the motion playing was planned on poses {age:.2f} s old (plan_lease_s "
+            f"{lease:g} s): plate stopped until the next plan ({run.lease_stops} such stops in this goal)")
+
+    def _apply(self, run: _RunningTask, t_s: float, outcome, publish_motion: bool = True) -> None:
+        """Publish a finished step: its motion (when new), the action feedback and the progress."""
+        step, step_ms = outcome
+        if isinstance(step, PpodError):
+            self._finish(False, f"planning failed: {step}")
             return
         run.last_step = step
-        if step.motion is not None and step.motion.key != run.last_motion_key:
+        if publish_motion and step.motion is not None and step.motion.key != run.last_motion_key:
             run.last_motion_key = step.motion.key
             self.goal_pub.publish(motion_to_msg(step.motion, self.get_clock().now().to_msg()))
         if run.multi:
@@ -460,13 +555,13 @@ class FieldPlannerNode(PpodLifecycleNode):
         else:
             fb = MovePart.Feedback(phase=step.phase, text=step.text, position_error_m=float(step.position_error_m),
                                    orientation_error_rad=float(step.angle_error_rad or 0.0))
-            pose = by_id.get(int(run.goal.part_id))
+            pose = self._pose_of(int(run.goal.part_id))
             if pose is not None:
                 fb.current_pose = pose.pose
         run.handle.publish_feedback(fb)
         self.progress_pub.publish(_progress(fb, run.multi, self.get_clock().now().to_msg()))
-        self.diagnostics.set("task", diag.OK, step.text, phase=step.phase,
-                             position_error_m=step.position_error_m, step_ms=1e3 * (time.perf_counter() - t0))
+        self.diagnostics.set("task", diag.OK, step.text, phase=step.phase, position_error_m=step.position_error_m,
+                             step_ms=step_ms, lease_stops=run.lease_stops)
         if step.done or step.failed_reason:
             self._finish(step.done and not step.failed_reason, step.failed_reason or step.text)
 

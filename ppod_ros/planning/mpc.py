@@ -590,6 +590,22 @@ class MultiTask:
             st.angle_error_rad is None or abs(st.angle_error_rad) <= f * g.angle_tol_rad)
             for g, st in zip(self.goals, statuses))
 
+    def plate_stopped(self, t_s: float, poses) -> None:
+        """The plate was stopped from outside at ``t_s`` (the field planner node does so when a plan
+        comes later than its lease: the motion playing was planned on poses too old to trust):
+        continue from rest, predicting the ramp down from the last plan's velocities, and replan at
+        the next frame. ``poses`` (N, 3) as in :meth:`step`, at ``t_s``."""
+        if self.finished is not None or self.current.is_zero():
+            return
+        poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+        if poses.shape[0] != len(self.parts):
+            raise ConfigError(f"poses: expected {len(self.parts)} rows, got {poses.shape[0]}")
+        self._v_current = (self.segment.velocity if self.segment is not None
+                           else np.zeros((len(self.goals), 3)))
+        self._switch(t_s, poses, PlateMotion.zero(self.current.frequency_hz, name="rest"),
+                     np.zeros((len(self.goals), 3)))
+        self.t_plan = -math.inf
+
     def _stop(self, t_s: float, poses: np.ndarray, statuses: list[PartStatus]) -> PlateMotion | None:
         """Every commanded part is well there: stop the plate (at rest, it holds every part). The
         prediction ramps down from the current motion's velocities."""

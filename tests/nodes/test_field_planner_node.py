@@ -216,3 +216,86 @@ def test_move_parts_brings_two_parts_to_their_own_goals_and_rejects_colliding_go
     assert ros.wait_until(lambda: len(progress) > 0, 5.0)
     assert {p.action for p in progress} == {"move_parts"} and list(progress[-1].part_ids) == [7, 9]
     assert {p.text for p in progress} <= {f.feedback.text for f in feedback}
+
+
+def test_a_late_plan_stops_the_plate_at_the_lease_and_is_dropped(ros, monkeypatch):
+    """Replanning that takes longer than ``plan_lease_s`` of device time (a busy host, a stall)
+    must not leave a motion playing that was planned on old poses: the plate stops at the first
+    frame past the lease, the late plan is never published, and the task replans from rest."""
+    import threading
+
+    from geometry_msgs.msg import Pose2D
+    from ppod_msgs.action import MoveParts
+    from ppod_msgs.msg import PartPose, PartPoseArray
+    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+    from rclpy.action import ActionClient
+
+    import ppod_nodes.field_planner as fp
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.convert import motion_from_msg, seconds_to_stamp
+
+    gate = threading.Event()
+    plans = []
+
+    class SlowSecondPlan(fp.MultiTask):
+        def _plan(self, t_s, poses, statuses):
+            plans.append(t_s)
+            if len(plans) == 2:
+                gate.wait(60)  # the second replanning "takes" until the test releases it
+            return super()._plan(t_s, poses, statuses)
+
+    monkeypatch.setattr(fp, "MultiTask", SlowSecondPlan)
+    _active(ros, ros.make(fp.FieldPlannerNode))
+    goals = ros.collect(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+    poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
+
+    def frame(t: float) -> None:
+        msg = PartPoseArray()
+        msg.header.stamp = seconds_to_stamp(t)
+        for pid, (x, y) in ((7, (-0.04, 0.035)), (9, (0.045, 0.02))):
+            p = PartPose(id=pid, label="washer", status=PartPose.STATUS_TRACKED)
+            p.pose.x, p.pose.y = x, y
+            p.stamp = msg.header.stamp
+            msg.parts.append(p)
+        poses_pub.publish(msg)
+        ros.wait_until(lambda: False, 0.1)
+
+    frame(0.0)
+    client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
+    assert client.wait_for_server(timeout_sec=10)
+    goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
+                          timeout_s=50.0)
+    feedback = []
+    handle = ros.wait_future(client.send_goal_async(goal, feedback_callback=feedback.append), 10, "goal")
+    assert handle.accepted
+    t = 0.0
+    while not goals and t < 0.4:
+        t = round(t + 0.1, 1)
+        frame(t)
+    assert ros.wait_until(lambda: len(goals) == 1, 30.0), "the first plan published no motion"
+    assert not motion_from_msg(goals[0]).is_zero()
+    first = t
+    while len(plans) < 2:  # up to the second replanning, 0.5 s after the first
+        t = round(t + 0.1, 1)
+        frame(t)
+    started = plans[1]
+    while t < plans[0] + 1.0 - 1e-9:  # within the lease (1 s of device time from the poses the
+        t = round(t + 0.1, 1)         # motion playing was planned on): it plays on
+        frame(t)
+    assert len(goals) == 1, "the plate was stopped within the lease"
+    frame(round(t + 0.1, 1))  # the first frame past the lease
+    assert ros.wait_until(lambda: len(goals) == 2, 10.0), "no stop past the lease"
+    assert motion_from_msg(goals[1]).is_zero()
+    gate.set()  # the late plan comes: it was made on poses from before the stop and is dropped
+    ros.wait_until(lambda: False, 0.5)
+    assert len(goals) == 2, "the late plan was published"
+    t = round(t + 0.1, 1)
+    while len(goals) == 2 and t < started + 5.0:  # replanned from rest (after the planner's dwell)
+        t = round(t + 0.1, 1)
+        n = len(feedback)
+        frame(t)
+        ros.wait_until(lambda n=n: len(feedback) > n, 5.0)  # the node stepped on this frame
+    assert len(goals) == 3, "no new plan after the stop"
+    assert not motion_from_msg(goals[2]).is_zero() and plans[-1] > plans[0] + 1.0
+    assert plans[0] <= first < started
+    ros.wait_future(handle.cancel_goal_async(), 10, "cancel")

@@ -448,3 +448,24 @@ def test_the_node_designs_only_the_centre_designs_its_templates_use():
     assert base_kinds(MpcSettings(templates=("sink", "line"), pair_lines=True)) == ["sink", "line_sink"]
     with pytest.raises(ConfigError, match="templates: unknown kind 'spiral'"):
         MpcSettings(templates=("sink", "spiral"))
+
+
+def test_a_plate_stopped_from_outside_continues_from_rest_and_replans_at_the_next_frame():
+    # The field planner node stops the plate when a plan comes later than its lease; the task must
+    # then predict the ramp down (not the motion it had chosen) and plan again from rest.
+    task = MultiTask([PointPart(0.3)], [PartGoal(0, 0.0, 0.0)])
+    first = task.step(0.0, [[0.03, 0.0, 0.0]])
+    assert first.motion is not None and not first.motion.is_zero()
+    v_planned = task.last_prediction["velocity"].copy()
+    assert np.hypot(*v_planned[0, :2]) > 1e-3
+    task.plate_stopped(0.8, [[0.025, 0.0, 0.0]])
+    assert task.current.is_zero()
+    pred = task.last_prediction
+    assert pred["t_s"] == 0.8 and pred["switched"]
+    assert np.allclose(pred["velocity"], 0.0) and np.allclose(pred["previous"], v_planned)
+    nxt = task.step(0.9, [[0.0249, 0.0, 0.0]])
+    assert nxt.plan_ms > 0, "no replanning at the first frame after the stop"
+    moving = MultiTask([PointPart(0.3)], [PartGoal(0, 0.0, 0.0)])
+    moving.step(0.0, [[0.03, 0.0, 0.0]])
+    with pytest.raises(ConfigError, match="poses"):
+        moving.plate_stopped(0.5, np.zeros((2, 3)))

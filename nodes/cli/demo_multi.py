@@ -166,9 +166,9 @@ class MultiDemo(_Demo):
                          "the field_planner rejected the MoveParts goals (see the log for the reason)",
                          f"MoveParts accepted: tracks {ids}")
         wall = time.monotonic() - self.wall_goals
-        ros.wait_until(lambda: False, 0.3)  # the last truth frames
+        device_s = float(self.log.latest_truth()[0] - self.t_start)  # at the same moment as the wall time
+        ros.wait_until(lambda: False, 0.3)  # the last truth frames (for the final poses only)
         t, poses = self.log.trajectories()
-        device_s = float(t[-1] - self.t_start)
         self.summary = summarize(self.goals, [p.part for p in self.scene.parts], t, poses, self.t_start, device_s,
                                  device_s / max(wall, 1e-9))
         _say(("done: " if res.success else "not reached: ") + res.reason)

@@ -27,7 +27,6 @@ import logging
 import os
 import shutil
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -185,6 +184,7 @@ def _signature() -> Any:
 def build(out_dir: Path | None = None, verbose: bool = False) -> Path:
     """Compile the module for this environment into ``out_dir`` (default: the first writable cache
     directory); returns its path. Takes 1-5 minutes; raises RuntimeError when it cannot be built."""
+    import tempfile  # only here: it imports random and hashlib's sha512 (about 5 ms)
     import warnings
 
     k = key()

@@ -30,7 +30,6 @@ from ppod_ros.physics import _aot, _threads
 from ppod_ros.physics import _layout as lay
 from ppod_ros.physics._params import check_configs, check_part, ensure_compiled, is_loaded, point_rows, rigid_rows
 from ppod_ros.physics._rk import INTEGRATORS
-from ppod_ros.physics._solve import solve_motions, solve_motions_serial
 from ppod_ros.physics.plate import TABLE_COLS, motion_table, table_kmax
 from ppod_ros.physics.settings import CHUNK_LARGE, REASONS, SolverSettings
 
@@ -576,8 +575,10 @@ def _kernel_for(kind: int, nthreads: int, args: tuple) -> tuple[Callable[..., No
         aot = _aot.kernel()
         if aot is not None and _aot.fits(args):
             return aot, time.perf_counter() - t0
+    from ppod_ros.physics import _solve  # not imported by calls the ahead-of-time kernel serves
+
     setup = ensure_compiled(("field", kind, nthreads > 1))
-    return (solve_motions if nthreads > 1 else solve_motions_serial), setup
+    return (_solve.solve_motions if nthreads > 1 else _solve.solve_motions_serial), setup
 
 
 def grid_configs(x: np.ndarray, y: np.ndarray, theta: np.ndarray | None = None) -> np.ndarray:

@@ -181,3 +181,12 @@ def test_ppod_field_json_imports_no_numba_and_writes_the_jit_result(aot_kernel, 
     timing = {"seconds", "setup_seconds"}
     assert {k: v for k, v in aot.items() if k not in timing} == {k: v for k, v in jit.items() if k not in timing}
     assert len(aot["velocity"]) == 21 * 21
+
+
+def test_startup_benchmark_runs_both_kernels_and_compares_their_fields(aot_kernel, capsys):
+    from ppod_bench.solver_startup import VARIANTS, measure
+
+    rows = measure(1)
+    assert [r[0] for r in rows] == list(VARIANTS)
+    assert all(float(r[2]) > 0 and float(r[4]) > 0 for r in rows)
+    assert "outputs identical" in capsys.readouterr().out

@@ -190,3 +190,20 @@ def test_startup_benchmark_runs_both_kernels_and_compares_their_fields(aot_kerne
     assert [r[0] for r in rows] == list(VARIANTS)
     assert all(float(r[2]) > 0 and float(r[4]) > 0 for r in rows)
     assert "outputs identical" in capsys.readouterr().out
+
+
+def test_kernel_modules_take_njit_from_jit_not_numba():
+    # A module-level numba import would bring numba back onto the small-call path, and a numba
+    # function compiled before the lazy kernels are materialised would see their proxies.
+    import ast
+
+    physics = ROOT / "ppod_ros" / "physics"
+    offenders = []
+    for path in sorted(physics.glob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in tree.body:
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            if any(n == "numba" or n.startswith("numba.") for n in names):
+                offenders.append(path.name)
+    assert offenders == []

@@ -207,3 +207,16 @@ def test_kernel_modules_take_njit_from_jit_not_numba():
             if any(n == "numba" or n.startswith("numba.") for n in names):
                 offenders.append(path.name)
     assert offenders == []
+
+
+def test_without_a_built_module_solve_field_runs_on_the_jit_kernel(monkeypatch, tmp_path):
+    from ppod_ros.physics import _params
+
+    monkeypatch.setattr(_aot, "cache_dirs", lambda: [tmp_path / "empty"])
+    monkeypatch.setattr(_aot, "_loaded", {})
+    monkeypatch.setenv(_aot.ENV_SWITCH, "1")
+    assert _aot.module_path() is None and _aot.kernel() is None
+    r = solve_field(suite_motion("Sink"), PointPart(0.3), [[0.02, 0.01], [-0.03, 0.04]],
+                    SolverSettings().replace(cache=False, threads=1))
+    assert r.valid.all()
+    assert _params.is_loaded(("field", 0, False))

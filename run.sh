@@ -93,6 +93,11 @@ ensure_venv() {
   "$VENV/bin/python" -c 'from ppod_ros.physics._params import ensure_compiled; import sys
 s = ensure_compiled()
 if s > 5: print(f"[setup] compiled the solver kernels in {s:.0f} s", file=sys.stderr)'
+  # The serial field kernel compiled ahead of time: small `ppod field` calls import no numba
+  # (docs/solver.md, "Start-up of a small call"); skipped quickly when it is up to date.
+  "$VENV/bin/python" -c 'from ppod_ros.physics import _aot; import sys
+s = _aot.ensure_built()
+if s > 0: print(f"[setup] compiled the ahead-of-time field kernel in {s:.0f} s", file=sys.stderr)'
 }
 
 ensure_system

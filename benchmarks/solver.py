@@ -14,7 +14,9 @@ configurations at equal or better error. --stalls measures the per-call latency 
 with a bounded busy loop on the other core. --design times one-frequency field designs (line sink
 and rotation) at the given sample grids: wall and CPU seconds, solver calls, configurations solved
 and mean periods per configuration. --separation times the simulator's part separation per cycle
-(cell list against the all-pairs reference, which must agree bit for bit).
+(cell list against the all-pairs reference, which must agree bit for bit). --startup times
+`ppod field config/motions/Sink.yaml --json OUT --quiet` in fresh processes, interleaved with the
+JIT kernel (PPOD_AOT=0), and checks that both write the same field.
 
 examples:
   ppod bench solver --quick
@@ -22,6 +24,7 @@ examples:
   ppod bench solver --suite --json out/bench/suite.json
   ppod bench solver --design 7 15
   ppod bench solver --separation
+  ppod bench solver --startup --startup-runs 9
   ppod bench solver --out out/bench
   ppod bench solver --baseline-configs 10 --motions Sink LineSinkX
 """
@@ -77,6 +80,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="disks in the separation section (default 1000)")
     parser.add_argument("--separation-cycles", type=int, default=200, metavar="N",
                         help="timed cycles of the cell list in the separation section (default 200)")
+    parser.add_argument("--startup", action="store_true",
+                        help="only the start-up section: `ppod field` on Sink 21 x 21 in fresh processes, "
+                             "ahead-of-time against JIT kernel")
+    parser.add_argument("--startup-runs", type=int, default=9, metavar="N",
+                        help="processes per variant in the start-up section (default 9)")
     parser.add_argument("--no-busy", dest="busy", action="store_false",
                         help="latency section without the busy loop on the other core")
 
@@ -246,6 +254,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_design(args, out)
     if args.separation:
         return _run_separation(args, out)
+    if args.startup:
+        return _run_startup(args, out)
     quick = args.quick
     n = 21 if quick else args.grid
     nr = 5 if quick else args.rigid_grid
@@ -535,6 +545,19 @@ def _run_separation(args, out: Path) -> int:
     text = _table("part separation per plate cycle (2 mm disks within r = 0.09 m, 0.2 mm rms step per cycle)",
                   ["method", "parts", "cycles", "moved / cycle", "p50 ms", "p90 ms", "max ms"], rows)
     (out / "solver_separation.txt").write_text(text + "\n", encoding="utf-8")
+    return 0
+
+
+def _run_startup(args, out: Path) -> int:
+    from ppod_bench.solver_startup import measure
+    from ppod_ros.errors import ConfigError
+
+    if args.startup_runs < 1:
+        raise ConfigError(f"--startup-runs: expected an integer >= 1, got {args.startup_runs}")
+    rows = measure(args.startup_runs)
+    text = _table("start-up: ppod field config/motions/Sink.yaml --json OUT --quiet (21 x 21), fresh processes",
+                  ["kernel", "runs", "wall min s", "wall median s", "CPU median s", "load"], rows)
+    (out / "solver_startup.txt").write_text(text + "\n", encoding="utf-8")
     return 0
 
 

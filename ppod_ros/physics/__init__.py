@@ -16,11 +16,12 @@ Public API (stable; see docs/solver.md):
 - :func:`limit_cycle`: the limit cycle itself at one configuration; :func:`grid_configs`: grids in
   the ``ppod field`` order; :data:`FIELD_CACHE`: the result cache.
 
-Nothing here imports rclpy or message types.
+Nothing here imports rclpy or message types. :func:`limit_cycle`, :class:`PartDynamics` and
+:class:`DynamicsState` are imported on first use (a small ``ppod field`` call needs neither).
 """
 
-from ppod_ros.physics.cycle import limit_cycle
-from ppod_ros.physics.dynamics import DynamicsState, PartDynamics
+from typing import Any
+
 from ppod_ros.physics.field import (
     FIELD_CACHE,
     WARM_STARTS,
@@ -40,6 +41,22 @@ from ppod_ros.physics.settings import (
     SolverSettings,
     preset,
 )
+
+#: Names imported from their module on first use (PEP 562): name -> module.
+_LAZY = {"limit_cycle": "ppod_ros.physics.cycle", "DynamicsState": "ppod_ros.physics.dynamics",
+         "PartDynamics": "ppod_ros.physics.dynamics"}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'ppod_ros.physics' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "FIELD_CACHE",

@@ -21,7 +21,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from ppod_ros.physics._contact import (
     contact_velocities,
@@ -32,6 +31,7 @@ from ppod_ros.physics._contact import (
     stick_forces,
     stick_ratio,
 )
+from ppod_ros.physics._jit import njit
 from ppod_ros.physics._layout import (
     AX_BAND,
     AX_DEPART,

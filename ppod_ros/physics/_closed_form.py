@@ -20,8 +20,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from ppod_ros.physics._jit import njit
 from ppod_ros.physics._layout import NOT_CONVERGED, OK, STEP_LIMIT
 from ppod_ros.physics.plate import G
 

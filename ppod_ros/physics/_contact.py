@@ -23,8 +23,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from ppod_ros.physics._jit import njit
 from ppod_ros.physics._layout import (
     AX_BAND,
     AX_DEPART,

@@ -11,10 +11,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
 
 from ppod_ros.physics._advance import advance, point_init, point_speed_limits, rigid_init, zero_tolerance
 from ppod_ros.physics._contact import rigid_geometry
+from ppod_ros.physics._jit import njit, prange
 from ppod_ros.physics._layout import (
     AX_READY,
     AX_SIZE,

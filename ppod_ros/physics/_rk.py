@@ -14,9 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ppod_ros.physics._contact import rhs
+from ppod_ros.physics._jit import njit
 from ppod_ros.physics._tableaus import TABLEAUS
 
 

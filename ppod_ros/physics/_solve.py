@@ -20,11 +20,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
 
 from ppod_ros.physics._advance import advance, point_init, point_speed_limits, rigid_init, zero_tolerance
 from ppod_ros.physics._closed_form import line_perp, line_solve, line_table, principal_direction
 from ppod_ros.physics._contact import gauss_solve, point_plate, rigid_geometry, stick_forces
+from ppod_ros.physics._jit import njit, prange
 from ppod_ros.physics._layout import (
     AX_SIZE,
     CONTACT_LOST,

@@ -20,11 +20,11 @@ changes numba's global state: the thread count of a parallel call is set with
 
 from __future__ import annotations
 
+import os
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
-
-import numba
 
 #: Expected serial time (s) above which a call runs in parallel.
 PARALLEL_MIN_SECONDS = 0.03
@@ -50,7 +50,7 @@ def plan(kind: str, units: float, threads: int | None, parallel_ready: bool = Tr
     up to n threads when the work is large enough to pay for the wake-up). ``parallel_ready``:
     whether the parallel kernel is already loaded (if not, ``PARALLEL_LOAD_S`` more is needed).
     """
-    avail = int(numba.config.NUMBA_NUM_THREADS)
+    avail = available_threads()
     want = avail if threads is None else min(int(threads), avail)
     if want <= 1:
         return 1
@@ -77,12 +77,34 @@ def learn(kind: str, units: float, seconds: float, nthreads: int, cpu_seconds: f
         _cost[kind] = blended if serial else min(_cost[kind], blended)
 
 
+def available_threads() -> int:
+    """numba's ``NUMBA_NUM_THREADS`` without importing numba when it is not imported yet.
+
+    Numba's default: the ``NUMBA_NUM_THREADS`` environment variable, else the CPUs this process may
+    run on (a serial call then needs no numba at all, see ``_aot``)."""
+    numba = sys.modules.get("numba")
+    if numba is not None and hasattr(numba, "config"):
+        return int(numba.config.NUMBA_NUM_THREADS)
+    raw = os.environ.get("NUMBA_NUM_THREADS", "").strip()
+    if raw:
+        try:
+            return max(1, int(raw))
+        except ValueError:
+            pass  # numba itself reports the bad value when it is imported
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
 @contextmanager
 def thread_count(nthreads: int) -> Iterator[None]:
     """numba's thread count for parallel kernels called inside (this thread only), restored after."""
     if nthreads <= 1:
         yield
         return
+    import numba
+
     old = numba.get_num_threads()
     numba.set_num_threads(nthreads)
     try:
@@ -91,4 +113,5 @@ def thread_count(nthreads: int) -> Iterator[None]:
         numba.set_num_threads(old)
 
 
-__all__ = ["PARALLEL_LOAD_S", "PARALLEL_MIN_SECONDS", "SEED_COST_S", "learn", "plan", "thread_count"]
+__all__ = ["PARALLEL_LOAD_S", "PARALLEL_MIN_SECONDS", "SEED_COST_S", "available_threads", "learn", "plan",
+           "thread_count"]

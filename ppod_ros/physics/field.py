@@ -26,11 +26,10 @@ import numpy as np
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
+from ppod_ros.physics import _aot, _threads
 from ppod_ros.physics import _layout as lay
-from ppod_ros.physics import _threads
 from ppod_ros.physics._params import check_configs, check_part, ensure_compiled, is_loaded, point_rows, rigid_rows
 from ppod_ros.physics._rk import INTEGRATORS
-from ppod_ros.physics._solve import solve_motions, solve_motions_serial
 from ppod_ros.physics.plate import TABLE_COLS, motion_table, table_kmax
 from ppod_ros.physics.settings import CHUNK_LARGE, REASONS, SolverSettings
 
@@ -540,14 +539,14 @@ def _run(motions, part, cfg, X0, R0, has, secants, settings, progress):
     out_sn = np.zeros((M, n), np.int64)
     cost_kind = f"field{kind}"
     nthreads = _threads.plan(cost_kind, M * n, settings.threads, is_loaded(("field", kind, True)))
-    kernel = solve_motions if nthreads > 1 else solve_motions_serial
-    setup = ensure_compiled(("field", kind, nthreads > 1))
+    args = (kind, MC, rows, P, X0, has, R0, SX0, SF0, SN0, Ts, kmaxs, tab.A, tab.B, tab.C, tab.E, tab.E3, S,
+            out_v, out_x, out_s, out_p, out_f, out_r, out_sx, out_sf, out_sn)
+    kernel, setup = _kernel_for(kind, nthreads, args)
     t0, c0 = time.perf_counter(), time.thread_time()
     with _threads.thread_count(nthreads):
         # Progress: split into ~20 slices aligned to the chunks (same results as one call).
         if progress is None:
-            kernel(kind, MC, rows, P, X0, has, R0, SX0, SF0, SN0, Ts, kmaxs, tab.A, tab.B, tab.C, tab.E, tab.E3,
-                   S, out_v, out_x, out_s, out_p, out_f, out_r, out_sx, out_sf, out_sn)
+            kernel(*args)
         else:
             # ~20 slices aligned to the chunks (same results as one call), each contiguous.
             step = max(chunk, -(-n // 20 // chunk) * chunk)
@@ -564,6 +563,22 @@ def _run(motions, part, cfg, X0, R0, has, secants, settings, progress):
                 progress(M * b, M * n)
     _threads.learn(cost_kind, M * n, time.perf_counter() - t0, nthreads, time.thread_time() - c0)
     return nthreads, setup, (out_v, out_x, out_s, out_p, out_f, out_r, out_sx, out_sf, out_sn)
+
+
+def _kernel_for(kind: int, nthreads: int, args: tuple) -> tuple[Callable[..., None], float]:
+    """The field kernel for this call and the seconds its loading took (0 when it was ready).
+
+    Serial calls use the ahead-of-time compiled kernel when it is built for this environment (no
+    numba import, identical results: ``_aot``), else numba's serial or parallel kernel."""
+    if nthreads <= 1:
+        t0 = time.perf_counter()
+        aot = _aot.kernel()
+        if aot is not None and _aot.fits(args):
+            return aot, time.perf_counter() - t0
+    from ppod_ros.physics import _solve  # not imported by calls the ahead-of-time kernel serves
+
+    setup = ensure_compiled(("field", kind, nthreads > 1))
+    return (_solve.solve_motions if nthreads > 1 else _solve.solve_motions_serial), setup
 
 
 def grid_configs(x: np.ndarray, y: np.ndarray, theta: np.ndarray | None = None) -> np.ndarray:

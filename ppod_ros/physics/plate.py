@@ -19,9 +19,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from ppod_ros.motion import GRAVITY_MPS2, PlateMotion
+from ppod_ros.physics._jit import njit
 
 #: Column offsets in the coefficient table.
 COL_W, COL_AS, COL_AC, COL_VS, COL_VC, COL_DS, COL_DC = 0, 1, 7, 13, 19, 25, 31

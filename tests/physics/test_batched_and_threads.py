@@ -61,7 +61,7 @@ def test_serial_and_parallel_dynamics_give_identical_trajectories(point_part, ri
 
 def test_small_calls_plan_serial_and_large_ones_parallel_by_learnt_cost(monkeypatch):
     monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
-    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    monkeypatch.setattr(_threads, "available_threads", lambda: 2)
     assert _threads.plan("field0", 37, None) == 1
     assert _threads.plan("field0", 100_000, None) == 2
     assert _threads.plan("field0", 100_000, 1) == 1  # threads=1: always serial
@@ -73,7 +73,7 @@ def test_stalled_parallel_calls_never_turn_small_calls_parallel(monkeypatch):
     # On a busy 2-core machine each parallel call waits ~16 ms for its second thread whatever the
     # work; learnt as cost, that kept 10-part dynamics cycles parallel (and stalling) for good.
     monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
-    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    monkeypatch.setattr(_threads, "available_threads", lambda: 2)
     for _ in range(20):
         _threads.learn("dyn0", 10, 0.016, 2)
     assert _threads.plan("dyn0", 10, None) == 1
@@ -85,7 +85,7 @@ def test_stalled_parallel_calls_never_turn_small_calls_parallel(monkeypatch):
 def test_serial_calls_learn_their_cost_from_the_threads_cpu_time_not_the_wall_time(monkeypatch):
     # A serial call preempted for 50 ms by another process did 0.5 ms of work.
     monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
-    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    monkeypatch.setattr(_threads, "available_threads", lambda: 2)
     for _ in range(20):
         _threads.learn("dyn0", 10, 0.05, 1, cpu_seconds=0.0005)
     assert abs(_threads._cost["dyn0"] - 5e-5) < 1e-6
@@ -100,7 +100,7 @@ def test_small_dynamics_stay_serial_after_parallel_calls_that_stalled(monkeypatc
 
     ensure_compiled(("dyn", 0, True))  # loaded: the forced calls below do run in parallel
     monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
-    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    monkeypatch.setattr(_threads, "available_threads", lambda: 2)
     real_parallel, real_plan = dynamics.advance_group, _threads.plan
 
     def stalled(*args):  # the second thread's wake-up on a busy core: waiting, no work
@@ -125,7 +125,7 @@ def test_small_dynamics_stay_serial_after_parallel_calls_that_stalled(monkeypatc
 
 def test_a_process_without_the_parallel_kernel_loads_it_only_for_larger_work(monkeypatch):
     monkeypatch.setattr(_threads, "_cost", dict(_threads.SEED_COST_S))
-    monkeypatch.setattr(_threads.numba.config, "NUMBA_NUM_THREADS", 2)
+    monkeypatch.setattr(_threads, "available_threads", lambda: 2)
     units = 441  # ppod field's default 21 x 21 grid: about 0.09 s expected serially
     assert _threads.plan("field0", units, None, parallel_ready=True) == 2
     assert _threads.plan("field0", units, None, parallel_ready=False) == 1

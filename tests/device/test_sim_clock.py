@@ -1,4 +1,4 @@
-"""The simulated device's pacer: real-time pacing, reported lag, and stalls given up instead of raced."""
+"""The simulated device's pacer: real-time pacing, reported lag made up at a bounded rate, long stalls given up."""
 
 import math
 
@@ -31,17 +31,26 @@ def test_paces_device_time_to_the_wall_clock_at_the_rate():
     assert pacer.max_lag_s == 0.0 and pacer.slips == 0
 
 
-def test_small_lag_is_caught_up_and_reported():
+def test_a_lag_is_caught_up_and_reported_never_faster_than_the_catch_up_rate():
     wall = FakeWall()
-    pacer = Pacer(1.0, max_catch_up_s=0.02, clock=wall.clock, sleep=wall.sleep)
+    pacer = Pacer(1.0, max_catch_up_s=1.0, clock=wall.clock, sleep=wall.sleep, catch_up_rate=1.25)
     pacer.start(0.0)
-    wall.t += 0.015  # the first step took 15 ms of wall time for 5 ms of device time
-    pacer.wait(0.005)
-    assert pacer.lag_s == pytest.approx(0.010) and pacer.slips == 0
-    pacer.wait(0.010)  # still 5 ms late: no sleep, the device runs on to catch up
-    assert wall.slept == []
-    pacer.wait(0.020)  # caught up: sleeps again, on the original schedule
-    assert wall.slept and wall.t == pytest.approx(100.020)
+    wall.t += 0.2  # the first step took 200 ms of wall time for 10 ms of device time (a stall)
+    pacer.wait(0.01)
+    assert pacer.lag_s == pytest.approx(0.19) and pacer.slips == 0 and wall.slept == []
+    # Then 10 ms steps computed instantly: device time runs at 1.25x the wall clock until caught up,
+    # so heartbeats sent every 50 ms of wall time arrive at most 62.5 ms of device time apart.
+    t0, k = wall.t, 1
+    while pacer.lag_s > 0 or k == 1:
+        k += 1
+        pacer.wait(0.01 * k)
+    dev = 0.01 * (k - 1)
+    assert wall.t - t0 == pytest.approx(dev / 1.25, abs=0.011)
+    assert wall.t - 100.0 == pytest.approx(0.01 * k, abs=0.011)  # caught up: on the original schedule
+    assert all(dt <= 0.01 / 1.25 + 1e-12 for dt in wall.slept)
+    assert pacer.slips == 0 and pacer.slipped_s == 0.0 and pacer.max_lag_s == pytest.approx(0.19)
+    pacer.wait(0.01 * (k + 1))  # on schedule again: 10 ms of device time take 10 ms of wall time
+    assert wall.slept[-1] == pytest.approx(0.01)
 
 
 def test_a_stall_is_given_up_so_device_time_never_races_the_wall_clock():
@@ -71,3 +80,5 @@ def test_free_running_and_bad_settings():
         Pacer(0.0)
     with pytest.raises(ConfigError, match="max_catch_up_s"):
         Pacer(1.0, max_catch_up_s=-1.0)
+    with pytest.raises(ConfigError, match="catch_up_rate"):
+        Pacer(1.0, catch_up_rate=5.0)

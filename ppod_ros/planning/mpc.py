@@ -135,6 +135,11 @@ class MpcSettings:
                                           # the largest that fits) until no such part is predicted faster than
                                           # this, so its unknown friction cannot throw it far (0: off)
     gentle_amplitudes: tuple[float, ...] = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5)
+    friction_grid: tuple[float, ...] = (0.67, 0.8, 1.0, 1.25, 1.5)  # a gentle start teaches the part's friction
+                                          # (these times the model's), not a velocity scale: friction slows a
+                                          # weak motion more than a strong one (a bracket of friction 0.4 moved at
+                                          # 0.4 of the model under a gentle start and 0.9 under the next motion,
+                                          # which its scale 0.4 then planned at 28 mm/s)
     template_sink_gain_per_s: float = 0.3
     template_speed_mps: float = 0.02      # the transport design (point part; a bracket about 15 mm/s)
     template_turn_radps: float = 0.3
@@ -514,6 +519,8 @@ class MultiTask:
         # Per unlearned motion (see MpcSettings.unlearned_motions): the fraction (G, 3) of the model
         # velocity the uncorrected plants play on average, and the time of its switch.
         self._first_error: dict[bytes, tuple[np.ndarray, float]] = {}
+        self._gentle_full: tuple[bytes, PlateMotion] | None = None  # (gentle motion's key, the motion at full
+                                                                     # amplitude it was scaled down from)
 
     # ------------------------------------------------------------------ templates
     def _base(self, kind: str) -> PlateMotion:
@@ -609,8 +616,12 @@ class MultiTask:
             return
         dt = t_s - seg.t_s
         disp = ramped_displacement(seg.previous, seg.velocity, dt, self.settings.ramp_s)
+        gentle = self._gentle_full if self._gentle_full is not None and self._gentle_full[0] == seg.motion_key else None
         for k, g in enumerate(self.goals):
             if g.index in self.unseen or g.index in seg.unseen:
+                continue
+            if gentle is not None and not self.state[g.index].estimated:
+                self._fit_friction(k, g, seg, dt, poses, gentle[1])
                 continue
             pred = disp[k, :2]
             d = poses[g.index, :2] - seg.poses[g.index, :2]
@@ -621,6 +632,33 @@ class MultiTask:
             st = self.state[g.index]
             st.scale = float(np.clip(st.scale + s.scale_gain * (ratio - st.scale), *s.scale_range))
             st.estimated = True
+
+    def _fit_friction(self, k: int, g: PartGoal, seg: _Segment, dt: float, poses: np.ndarray,
+                      full: PlateMotion) -> None:
+        """After a gentle start: the friction (``friction_grid`` times the model's) whose prediction of
+        the gentle motion is nearest the part's displacement, and from it the velocity scale of the
+        motion at full amplitude (the next motions are strong)."""
+        s, part = self.settings, self.parts[g.index]
+        d = poses[g.index, :2] - seg.poses[g.index, :2]
+        if not np.all(np.isfinite(d)):
+            return
+        cfg = seg.poses[[g.index], :_dim(part)]
+        factor = self._plant_factor(self.current, seg.t_s)[k, :2]   # the unlearned plant's mean
+        models = [_with_friction(part, f) for f in s.friction_grid]
+        gentle = self.current
+        errs = []
+        for m in models:
+            v = np.nan_to_num(predict_velocities([gentle], m, cfg)[0][0, 0, :2]) * factor
+            errs.append(float(np.hypot(*(d - ramped_displacement(seg.previous[k, :2], v, dt, s.ramp_s)))))
+        best = models[int(np.argmin(errs))]
+        v, ok = predict_velocities([full], part, cfg)
+        vf, okf = predict_velocities([full], best, cfg)
+        v1, v2 = np.nan_to_num(v[0, 0, :2]), np.nan_to_num(vf[0, 0, :2])
+        n2 = float(v1 @ v1)
+        st = self.state[g.index]
+        if ok.all() and okf.all() and n2 > 1e-12:
+            st.scale = float(np.clip((v2 @ v1) / n2, *s.scale_range))
+        st.estimated = True
 
     # ------------------------------------------------------------------ planning
     def _all_well_within(self, statuses: list[PartStatus]) -> bool:
@@ -703,6 +741,7 @@ class MultiTask:
         if self.current.is_zero() and math.isfinite(float(final_cost[0])):
             gentle = self._gentle(best_motion, poses)
             if gentle is not best_motion:
+                self._gentle_full = (gentle.key, best_motion)
                 best_motion = gentle
                 final_cost, final_vel = self._costs([best_motion], poses, statuses)
         if unlearned and best_motion.key != self.current.key:

@@ -52,9 +52,11 @@ def test_bracket_with_unknown_friction_reaches_pose_and_is_held_at_rest():
     assert abs(math.degrees((final[2] + math.pi) % (2 * math.pi) - math.pi)) <= 2.5
     # Never thrown: no jump between camera frames (the full dynamics reports brief contact losses
     # of the higher-friction bracket where the asymptotic solver finds the limit cycle in contact;
-    # the part is put back at rest where it is and keeps its path).
+    # the part is put back at rest where it is and keeps its path). 3 mm a frame is 30 mm/s: the
+    # first strong motion after a gentle start carries the bracket at 22 mm/s for a second (the
+    # 1 s horizon makes up for the ramp from the slow start), as predicted.
     jumps = np.hypot(*np.diff(run.trajectory[:, 0, :2], axis=0).T)
-    assert jumps.max() < 2e-3
+    assert jumps.max() < 3e-3
     # Done means the plate was stopped (a plate at rest holds the part).
     assert task.current.is_zero()
     # The estimator saw the difference: the velocity scale moved off 1.
@@ -535,3 +537,26 @@ def test_the_first_error_cost_is_the_spread_over_the_plants_and_the_friction_pri
     task.state[0].estimated = True
     task.switches = task.settings.unlearned_motions
     assert task._first_error_costs([sink], pose, statuses)[0] == 0.0
+
+
+def test_a_gentle_start_teaches_the_friction_and_the_scale_of_the_strong_motion_follows_from_it():
+    # Regression (tests above, the bracket of friction 0.4): the velocity scale learned under the gentle
+    # start (0.4: friction slows a weak motion most) planned the next, strong motion at 28 mm/s.
+    from ppod_ros.planning.mpc import _with_friction, ramped_displacement
+
+    task, pose = _washer_far_from_its_goal()
+    task.step(0.0, pose)
+    gentle, full = task.current, task._gentle_full[1]
+    assert task._gentle_full[0] == gentle.key and full.key != gentle.key
+    heavy = _with_friction(task.parts[0], 1.5)
+    factor = task._plant_factor(gentle, 0.0)[0, :2]
+    v_heavy = predict.predict_velocities([gentle], heavy, pose[:, :2])[0][0, 0] * factor
+    moved_pose = pose.copy()
+    moved_pose[0, :2] += ramped_displacement(np.zeros(2), v_heavy, 0.5, task.settings.ramp_s)
+    task.step(0.5, moved_pose)
+    st = task.state[0]
+    assert st.estimated
+    v1 = predict.predict_velocities([full], task.parts[0], pose[:, :2])[0][0, 0]
+    vf = predict.predict_velocities([full], heavy, pose[:, :2])[0][0, 0]
+    assert st.scale == pytest.approx(float(np.clip(vf @ v1 / (v1 @ v1), *task.settings.scale_range)), rel=1e-6)
+    assert st.scale < 1.0

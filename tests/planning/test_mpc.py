@@ -560,3 +560,25 @@ def test_a_gentle_start_teaches_the_friction_and_the_scale_of_the_strong_motion_
     vf = predict.predict_velocities([full], heavy, pose[:, :2])[0][0, 0]
     assert st.scale == pytest.approx(float(np.clip(vf @ v1 / (v1 @ v1), *task.settings.scale_range)), rel=1e-6)
     assert st.scale < 1.0
+
+
+def test_the_stop_is_judged_where_the_ramp_down_leaves_the_parts():
+    # Regression (ppod bench planner --sections multipart, one bracket, scene 4): stopped 0.4 mm from
+    # its goal while moving at 8 mm/s, the ramp down carried the bracket 2.1 mm and 2.7 deg past it,
+    # and coming back took 6 s.
+    from ppod_ros.planning.mpc import _Segment
+
+    def judged(offset_m: float, **overrides) -> bool:
+        task, _ = _washer_far_from_its_goal(**overrides)
+        g = task.goals[0]
+        pose = np.array([[g.x_m + offset_m, g.y_m, 0.0]])
+        task.current = template_motion("sink", task, g, pose[0])[0]
+        v = np.array([[0.008, 0.0, 0.0]])          # towards +x: through the goal
+        task.segment = _Segment(0.0, pose.copy(), v, v, task.current.key)
+        task.t0 = 0.0
+        return task._all_well_within(task._statuses(1.0, pose), pose, 1.0)
+
+    ramp_m = 0.008 * 0.5 * MpcSettings().ramp_s     # 2 mm carried by the ramp down
+    assert not judged(0.0)                          # at the goal, but would stop 2 mm past it
+    assert judged(-ramp_m)                          # 2 mm before it: the ramp down ends on it
+    assert judged(0.0, stop_ahead=False) and not judged(-ramp_m, stop_ahead=False)

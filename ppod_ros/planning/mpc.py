@@ -873,14 +873,17 @@ class MultiTask:
             d = v[:, :G, :2].reshape(len(moving), s.plant_tolerance.samples, G, 2)
             d = d * (span * scales)[None, None, :, None]
             var += np.mean(np.sum((d - d.mean(axis=1, keepdims=True)) ** 2, axis=3), axis=1)
-        for k, g in enumerate(self.goals):
-            if self.state[g.index].estimated or g.index in self.unseen:
+        for part, js in self._groups:
+            # Friction unknown: the displacements at the ends of the prior range, as a uniform spread
+            # (one call per end for the parts of one model).
+            ks = [j for j in js if j < G and not self.state[self._rows[j]].estimated
+                  and self._rows[j] not in self.unseen]
+            if not ks:
                 continue
-            # Friction unknown: the displacements at the ends of the prior range, as a uniform spread.
-            ends = [predict_velocities([motions[m] for m in moving], _with_friction(self.parts[g.index], f),
-                                       poses[[g.index], :_dim(self.parts[g.index])])[0][:, 0, :2]
+            cfg = poses[[self._rows[j] for j in ks], :_dim(part)]
+            ends = [predict_velocities([motions[m] for m in moving], _with_friction(part, f), cfg)[0][..., :2]
                     for f in s.friction_prior]
-            var[:, k] += np.sum(np.nan_to_num(ends[1] - ends[0]) ** 2, axis=1) * (span * scales[k]) ** 2 / 12.0
+            var[:, ks] += np.sum(np.nan_to_num(ends[1] - ends[0]) ** 2, axis=2) * (span * scales[ks]) ** 2 / 12.0
         _way, weight = self._waypoints(poses, statuses)
         out[moving] = np.sum((s.first_error_weight * weight[None]) ** 2 * var / s.max_speed_mps ** 2, axis=1)
         return out

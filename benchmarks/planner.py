@@ -285,14 +285,19 @@ def _busy(deadline: float) -> None:
             x += i * 1e-9
 
 
-def _switch_deviations(records: list, run, goals) -> list[float]:
+def _switch_deviations(records: list, run, goals, first: int | None = None) -> list[float]:
     """Per commanded part: the worst distance of its true path from the predicted one over each
-    switch (from the switch to the next replanning after the ramp)."""
+    switch (from the switch to the next replanning after the ramp). ``first``: over the first this
+    many switches only (negative: all but the first -first)."""
     from ppod_ros.planning.mpc import ramped_displacement
 
     times, traj = run.times, run.trajectory
     worst = [0.0] * len(goals)
+    keep = range(len(records)) if first is None else (range(min(first, len(records))) if first >= 0
+                                                      else range(-first, len(records)))
     for k, rec in enumerate(records):
+        if k not in keep:
+            continue
         ts = rec["t_s"]
         te = records[k + 1]["t_s"] if k + 1 < len(records) else ts + rec["ramp_s"] + 0.5
         te = min(te, ts + rec["ramp_s"] + 1.0)
@@ -390,6 +395,10 @@ def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float)
                     if planner == "mpc":
                         row["plan_ms"] = list(map(float, task.plan_times_ms[1:]))  # the first pays the designs
                         row["switch_deviation_mm"] = [1e3 * d for d in _switch_deviations(records, run, goals)]
+                        # The first two motions (the plant not learned yet, the friction unknown) and the rest.
+                        for key, first in (("first2", 2), ("later", -2)):
+                            row[f"switch_deviation_{key}_mm"] = [1e3 * d for d in
+                                                                 _switch_deviations(records, run, goals, first)]
                     rows.append(row)
                     if planner == "mpc":
                         paths += [run.trajectory[:, i, :2] for i in range(count)]
@@ -476,7 +485,12 @@ def _summary(r: dict) -> None:
             if planner == "mpc":
                 dev = [d for x in rows for d in x["switch_deviation_mm"]]
                 plan = [t for x in rows for t in x["plan_ms"]]
-                line += (f"; worst deviation over a switch {max(dev):.2f} mm" if dev else "") + (
+                first2 = [d for x in rows for d in x.get("switch_deviation_first2_mm", [])]
+                later = [d for x in rows for d in x.get("switch_deviation_later_mm", [])]
+                line += (f"; deviation over a switch per part median {np.median(dev):.2f} mm, worst {max(dev):.2f} mm"
+                         + (f" (first two motions median {np.median(first2):.2f}, worst {max(first2):.2f}; later "
+                            f"median {np.median(later):.2f}, worst {max(later):.2f})" if first2 and later else "")
+                         if dev else "") + (
                     f"; replanning median {np.median(plan):.0f} ms, 95th pct {np.percentile(plan, 95):.0f} ms"
                     if plan else "")
             else:

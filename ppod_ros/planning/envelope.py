@@ -88,6 +88,27 @@ def _readings(device, tolerance: PlantTolerance, frequency_hz: float, ks: tuple[
     return np.einsum("kij,sjl,klm->skim", G0, Minv, np.linalg.inv(G0))
 
 
+@lru_cache(maxsize=64)
+def _played(device, tolerance: PlantTolerance, frequency_hz: float, ks: tuple[int, ...]) -> np.ndarray:
+    """Per drawn plant and harmonic, the map from a goal's phasors to the plate motion the nominal
+    feed-forward alone plays on that plant: ``G0 M G0^-1``, (samples, K, 6, 6)."""
+    plant = _envelope(device).plant
+    G0 = plant.frequency_response(frequency_hz * np.asarray(ks, float))  # (K, 6, 6)
+    return np.einsum("kij,sjl,klm->skim", G0, tolerance.matrices(), np.linalg.inv(G0))
+
+
+def uncorrected_motions(motion: PlateMotion, device, tolerance: PlantTolerance) -> list[PlateMotion]:
+    """What the plants within ``tolerance`` play of ``motion`` before the accelerometer feedback has
+    learned them (the nominal feed-forward alone, ``G0 M G0^-1 X`` per drawn plant): the first
+    motions of a session (docs/feedback.md: they start 12-18 % off)."""
+    active = motion.pruned()
+    if active.is_zero():
+        return [motion] * tolerance.samples
+    ks = tuple(int(k) for k in active.k)
+    X = np.einsum("skij,kj->ski", _played(device, tolerance, float(motion.frequency_hz), ks), active.phasors())
+    return [PlateMotion.from_phasors(motion.frequency_hz, active.k, x, name=motion.name) for x in X]
+
+
 _MOTION_LIMITS = ("limits.plate_accel_mps2", "limits.plate_angular_accel_radps2", "limits.contact_margin_mps2")
 
 
@@ -149,4 +170,4 @@ def fit_envelope(motion: PlateMotion, device, headroom: float = 0.15, step: floa
                      requested=err.requested)
 
 
-__all__ = ["PlantTolerance", "corrected_motion_ratios", "fit_envelope"]
+__all__ = ["PlantTolerance", "corrected_motion_ratios", "fit_envelope", "uncorrected_motions"]

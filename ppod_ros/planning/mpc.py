@@ -50,7 +50,7 @@ from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.planning.design import _SCALE, DEFAULT_FREQUENCY_HZ, design_field, orient_phasors
-from ppod_ros.planning.envelope import PlantTolerance, fit_envelope
+from ppod_ros.planning.envelope import PlantTolerance, fit_envelope, uncorrected_motions
 from ppod_ros.planning.predict import predict_velocities
 from ppod_ros.planning.specs import CENTRE_RADIUS_M, FieldSpec
 from ppod_ros.planning.task import TaskStep
@@ -106,6 +106,9 @@ class MpcSettings:
     focus_others: float = 0.2             # this (a linear field cannot serve every part at once)
     stop_within: float = 0.6              # the plate stops when every part is within this fraction of its
                                           # tolerances (tracker noise must not flip a part back out)
+    stop_ahead: bool = True               # judge the stop where the ramp down leaves the parts, not where they
+                                          # are (a bracket stopped 0.4 mm from its goal was carried 2.1 mm and
+                                          # 2.7 deg past it by the ramp down, and took 6 s more to come back)
     settle_s: float = 0.5                 # within tolerance for this long: reached
     lost_after_s: float = 6.0             # a commanded part unseen this long: failed (touching parts
                                           # are lost by the tracker for a while)
@@ -115,6 +118,31 @@ class MpcSettings:
                                           # gains for one part at the others' cost)
     pair_lines: bool = False              # the line sink through every two goals whose parts are near them
                                           # (4 of 8 against 5 of 8)
+    unlearned_motions: int = 0            # the accelerometer feedback plays a session's first motions with
+                                          # the plant it has not learned yet (docs/feedback.md: 12-18 % off,
+                                          # then 3.5 %): they are predicted at the mean velocity over the
+                                          # plant tolerance's draws of the uncorrected plant (0: never)
+    feedback_first_estimate_s: float = 1.0  # ... until its first estimate after the switch, and from there
+    feedback_decay_s: float = 1.0         # the error decays with this time constant (ActuatorPlantError)
+    first_error_weight: float = 0.0       # an unlearned motion's candidates also cost the spread (rms, m) of
+                                          # each part's predicted displacement over those draws, times this:
+                                          # a sink's velocity off its centre varies 0.3-3x over them, a
+                                          # transport's +-25 %
+    friction_prior: tuple[float, float] = (0.67, 1.5)  # a part whose velocity scale is not estimated yet
+                                          # (no motion has moved it): its friction is this range times the
+                                          # model's (0.2-0.45 about 0.3), and the candidates also cost the
+                                          # spread of its predicted displacement over that range (a bracket
+                                          # of friction 0.42 moved at 0.54 of the model, one of 0.22 at 1.0)
+    gentle_speed_mps: float = 0.0         # start gently: a motion from rest while a commanded part's velocity
+                                          # scale is not estimated yet is scaled down (``gentle_amplitudes``,
+                                          # the largest that fits) until no such part is predicted faster than
+                                          # this, so its unknown friction cannot throw it far (0: off)
+    gentle_amplitudes: tuple[float, ...] = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5)
+    friction_grid: tuple[float, ...] = (0.67, 0.8, 1.0, 1.25, 1.5)  # a gentle start teaches the part's friction
+                                          # (these times the model's), not a velocity scale: friction slows a
+                                          # weak motion more than a strong one (a bracket of friction 0.4 moved at
+                                          # 0.4 of the model under a gentle start and 0.9 under the next motion,
+                                          # which its scale 0.4 then planned at 28 mm/s)
     template_sink_gain_per_s: float = 0.3
     template_speed_mps: float = 0.02      # the transport design (point part; a bracket about 15 mm/s)
     template_turn_radps: float = 0.3
@@ -396,6 +424,7 @@ class _Tracked:
     in_tol_since: float | None = None
     time_to_goal_s: float | None = None
     scale: float = 1.0
+    estimated: bool = False      # the scale has been estimated from a motion at least once
     last_seen: float | None = None
 
 
@@ -407,6 +436,20 @@ class _Segment:
     previous: np.ndarray         # (G, 3) the same under the motion before the switch
     motion_key: bytes = b""
     unseen: frozenset = frozenset()  # rows planned at their last seen pose
+
+
+def _dim(part: PointPart | RigidPart) -> int:
+    return 3 if isinstance(part, RigidPart) else 2
+
+
+def _with_friction(part: PointPart | RigidPart, factor: float) -> PointPart | RigidPart:
+    """The part model with its friction (kinetic and static) times ``factor``."""
+    import dataclasses
+
+    ms = None if part.mu_static is None else np.asarray(part.mu_static) * factor
+    if isinstance(part, RigidPart):
+        return dataclasses.replace(part, mu=np.asarray(part.mu) * factor, mu_static=ms)
+    return dataclasses.replace(part, mu=float(part.mu) * factor, mu_static=None if ms is None else float(ms))
 
 
 def ramped_displacement(v_old: np.ndarray, v_new: np.ndarray, t_s: float, ramp_s: float) -> np.ndarray:
@@ -476,6 +519,11 @@ class MultiTask:
         self._memo: dict[bytes, tuple[np.ndarray, bool]] = {}
         self._fits: dict[bytes, PlateMotion] = {}
         self._memo_poses: bytes | None = None
+        # Per unlearned motion (see MpcSettings.unlearned_motions): the fraction (G, 3) of the model
+        # velocity the uncorrected plants play on average, and the time of its switch.
+        self._first_error: dict[bytes, tuple[np.ndarray, float]] = {}
+        self._gentle_full: tuple[bytes, PlateMotion] | None = None  # (gentle motion's key, the motion at full
+                                                                     # amplitude it was scaled down from)
 
     # ------------------------------------------------------------------ templates
     def _base(self, kind: str) -> PlateMotion:
@@ -515,7 +563,7 @@ class MultiTask:
             n_ok = sum(s.reached for s in statuses)
             return self._end(statuses, f"timeout after {elapsed:.1f} s: {n_ok} of {len(statuses)} parts reached")
         motion, plan_ms = None, 0.0
-        if not self.current.is_zero() and self._all_well_within(statuses):
+        if not self.current.is_zero() and self._all_well_within(statuses, poses, t_s):
             # Checked at every camera frame, not only when replanning: a part crossing its
             # tolerance between two replanning steps would be carried through it.
             motion = self._stop(t_s, poses, statuses)
@@ -571,8 +619,12 @@ class MultiTask:
             return
         dt = t_s - seg.t_s
         disp = ramped_displacement(seg.previous, seg.velocity, dt, self.settings.ramp_s)
+        gentle = self._gentle_full if self._gentle_full is not None and self._gentle_full[0] == seg.motion_key else None
         for k, g in enumerate(self.goals):
             if g.index in self.unseen or g.index in seg.unseen:
+                continue
+            if gentle is not None and not self.state[g.index].estimated:
+                self._fit_friction(k, g, seg, dt, poses, gentle[1])
                 continue
             pred = disp[k, :2]
             d = poses[g.index, :2] - seg.poses[g.index, :2]
@@ -582,13 +634,62 @@ class MultiTask:
             ratio = float(np.clip((d @ pred) / n2, *s.scale_range))
             st = self.state[g.index]
             st.scale = float(np.clip(st.scale + s.scale_gain * (ratio - st.scale), *s.scale_range))
+            st.estimated = True
+
+    def _fit_friction(self, k: int, g: PartGoal, seg: _Segment, dt: float, poses: np.ndarray,
+                      full: PlateMotion) -> None:
+        """After a gentle start: the friction (``friction_grid`` times the model's) whose prediction of
+        the gentle motion is nearest the part's displacement, and from it the velocity scale of the
+        motion at full amplitude (the next motions are strong)."""
+        s, part = self.settings, self.parts[g.index]
+        d = poses[g.index, :2] - seg.poses[g.index, :2]
+        if not np.all(np.isfinite(d)):
+            return
+        cfg = seg.poses[[g.index], :_dim(part)]
+        factor = self._plant_factor(self.current, seg.t_s)[k, :2]   # the unlearned plant's mean
+        models = [_with_friction(part, f) for f in s.friction_grid]
+        gentle = self.current
+        errs = []
+        for m in models:
+            v = np.nan_to_num(predict_velocities([gentle], m, cfg)[0][0, 0, :2]) * factor
+            errs.append(float(np.hypot(*(d - ramped_displacement(seg.previous[k, :2], v, dt, s.ramp_s)))))
+        best = models[int(np.argmin(errs))]
+        v, ok = predict_velocities([full], part, cfg)
+        vf, okf = predict_velocities([full], best, cfg)
+        v1, v2 = np.nan_to_num(v[0, 0, :2]), np.nan_to_num(vf[0, 0, :2])
+        n2 = float(v1 @ v1)
+        st = self.state[g.index]
+        if ok.all() and okf.all() and n2 > 1e-12:
+            st.scale = float(np.clip((v2 @ v1) / n2, *s.scale_range))
+        st.estimated = True
 
     # ------------------------------------------------------------------ planning
-    def _all_well_within(self, statuses: list[PartStatus]) -> bool:
-        f = self.settings.stop_within
-        return all(st.position_error_m <= f * g.position_tol_m and (
-            st.angle_error_rad is None or abs(st.angle_error_rad) <= f * g.angle_tol_rad)
-            for g, st in zip(self.goals, statuses))
+    def _all_well_within(self, statuses: list[PartStatus], poses: np.ndarray | None = None,
+                         t_s: float | None = None) -> bool:
+        """Every commanded part within ``stop_within`` of its tolerances; with ``stop_ahead`` and a
+        motion playing, judged where the ramp down would leave it: the pose plus the predicted velocity
+        now (the segment's, ramp included, times the part's scale) over half the ramp."""
+        s = self.settings
+        f = s.stop_within
+        seg = self.segment
+        if not (s.stop_ahead and poses is not None and seg is not None and seg.motion_key == self.current.key
+                and not self.current.is_zero()):
+            return all(st.position_error_m <= f * g.position_tol_m and (
+                st.angle_error_rad is None or abs(st.angle_error_rad) <= f * g.angle_tol_rad)
+                for g, st in zip(self.goals, statuses))
+        a = min(1.0, max(0.0, (t_s - seg.t_s) / s.ramp_s)) if s.ramp_s > 0 else 1.0
+        v_now = seg.previous + a * (seg.velocity - seg.previous)
+        for k, g in enumerate(self.goals):
+            p = poses[g.index]
+            if not np.all(np.isfinite(p[:2])):
+                return False
+            stop = p + self.state[g.index].scale * v_now[k] * (0.5 * s.ramp_s)
+            if math.hypot(stop[0] - g.x_m, stop[1] - g.y_m) > f * g.position_tol_m:
+                return False
+            if g.theta_rad is not None and abs(_wrap(stop[2] - g.theta_rad, self.symmetry[g.index])) > \
+                    f * g.angle_tol_rad:
+                return False
+        return True
 
     def plate_stopped(self, t_s: float, poses) -> None:
         """The plate was stopped from outside at ``t_s`` (the field planner node does so when a plan
@@ -621,7 +722,7 @@ class MultiTask:
 
     def _plan(self, t_s: float, poses: np.ndarray, statuses: list[PartStatus]) -> PlateMotion | None:
         s = self.settings
-        if self._all_well_within(statuses):
+        if self._all_well_within(statuses, poses, t_s):
             return self._stop(t_s, poses, statuses)
         self.phase = "moving"
         self._update_focus(t_s, statuses)
@@ -651,9 +752,18 @@ class MultiTask:
         # moved off the centre or mirrored can need less amplitude, and a field is far from linear
         # in it (a rotation that ranked 34 % better than the current motion was 9 % better fitted).
         order = [int(i) for i in np.argsort(costs) if i > 0 and math.isfinite(float(costs[i]))][:s.fitted_candidates]
+        # The next switch plays a motion the feedback has not learned the plant for: the ranked
+        # candidates (and the refined one) also cost the spread of their predicted paths over the
+        # plants within the tolerance, and the others are out (they carry no such cost).
+        unlearned = s.first_error_weight > 0 and (
+            (s.plant_tolerance is not None and self.switches < s.unlearned_motions)
+            or any(not self.state[g.index].estimated for g in self.goals))
         if order:
             fitted = [self._fitted(pool[i]) for i in order]
             fitted_costs, _ = self._costs(fitted, poses, statuses)
+            if unlearned:
+                fitted_costs = fitted_costs + self._first_error_costs(fitted, poses, statuses)
+                costs[[i for i in range(1, len(costs)) if i not in order]] = np.inf
             for i, motion, cost in zip(order, fitted, fitted_costs):
                 pool[i], costs[i] = motion, cost
         best = int(np.argmin(costs))
@@ -662,10 +772,20 @@ class MultiTask:
         # compete as they are).
         start = best_motion if not best_motion.is_zero() else candidates[1]
         refined, refined_cost = self._refine(start, poses, statuses)
+        if refined is not None and unlearned:
+            refined_cost += float(self._first_error_costs([refined], poses, statuses)[0])
         if refined is not None and refined_cost < best_cost:
             best_motion, best_cost = refined, refined_cost
         best_motion, _scale = fit_envelope(best_motion, self.device, s.headroom, tolerance=s.plant_tolerance)
         final_cost, final_vel = self._costs([best_motion], poses, statuses)
+        if self.current.is_zero() and math.isfinite(float(final_cost[0])):
+            gentle = self._gentle(best_motion, poses)
+            if gentle is not best_motion:
+                self._gentle_full = (gentle.key, best_motion)
+                best_motion = gentle
+                final_cost, final_vel = self._costs([best_motion], poses, statuses)
+        if unlearned and best_motion.key != self.current.key:
+            final_cost = final_cost + self._first_error_costs([best_motion], poses, statuses)
         if not math.isfinite(float(final_cost[0])):
             if not math.isfinite(float(current_cost[0])):  # nothing safe found: stop the plate
                 rest = PlateMotion.zero(self.current.frequency_hz, name="rest")
@@ -730,18 +850,109 @@ class MultiTask:
         if len(self.goals) > 1 and unfinished and t_s - t0 >= s.stall_s and metric > 0.9 * m0:
             self.focus, self.focus_since = max(unfinished)[1], t_s
 
+    def _gentle(self, motion: PlateMotion, poses: np.ndarray) -> PlateMotion:
+        """``motion`` (from rest) scaled down to the largest of ``gentle_amplitudes`` at which no
+        commanded part whose velocity scale is not estimated yet is predicted faster than
+        ``gentle_speed_mps``, contact kept (all amplitudes in one batched call); the smallest valid
+        one when none is that slow; ``motion`` itself when every part's scale is known."""
+        s, G = self.settings, len(self.goals)
+        fresh = [k for k, g in enumerate(self.goals)
+                 if not self.state[g.index].estimated and g.index not in self.unseen]
+        if s.gentle_speed_mps <= 0 or motion.is_zero() or not fresh:
+            return motion
+        amps = sorted(set(s.gentle_amplitudes) | {1.0}, reverse=True)
+        trials = [motion if a == 1.0 else motion.scaled(a) for a in amps]
+        v, ok = self._velocities(trials, poses)
+        speed = np.hypot(v[:, :G, 0], v[:, :G, 1])[:, fresh].max(axis=1)
+        valid = [i for i in range(len(trials)) if ok[i]]
+        if not valid:
+            return motion
+        slow = [i for i in valid if speed[i] <= s.gentle_speed_mps]
+        return trials[slow[0] if slow else valid[-1]]
+
+    def _first_error_costs(self, motions, poses: np.ndarray, statuses: list[PartStatus]) -> np.ndarray:
+        """Per motion (M,), the cost of its first error: the rms spread of each commanded part's
+        predicted displacement over the horizon across the plant tolerance's uncorrected plants
+        (``uncorrected_motions``), weighted as the part's waypoint and by ``first_error_weight``, in the
+        cost's units. All draws of all motions in one batched call per part model."""
+        s, G = self.settings, len(self.goals)
+        moving = [m for m, motion in enumerate(motions) if not motion.is_zero()]
+        out = np.zeros(len(motions))
+        if not moving:
+            return out
+        scales = np.array([self.state[g.index].scale for g in self.goals])
+        span = s.horizon_s - 0.5 * min(s.ramp_s, s.horizon_s)
+        var = np.zeros((len(moving), G))
+        if s.plant_tolerance is not None and self.switches < s.unlearned_motions:
+            draws = [d for m in moving for d in uncorrected_motions(motions[m], self.device, s.plant_tolerance)]
+            v, _ok = self._velocities(draws, poses)
+            d = v[:, :G, :2].reshape(len(moving), s.plant_tolerance.samples, G, 2)
+            d = d * (span * scales)[None, None, :, None]
+            var += np.mean(np.sum((d - d.mean(axis=1, keepdims=True)) ** 2, axis=3), axis=1)
+        for part, js in self._groups:
+            # Friction unknown: the displacements at the ends of the prior range, as a uniform spread
+            # (one call per end for the parts of one model).
+            ks = [j for j in js if j < G and not self.state[self._rows[j]].estimated
+                  and self._rows[j] not in self.unseen]
+            if not ks:
+                continue
+            cfg = poses[[self._rows[j] for j in ks], :_dim(part)]
+            ends = [predict_velocities([motions[m] for m in moving], _with_friction(part, f), cfg)[0][..., :2]
+                    for f in s.friction_prior]
+            var[:, ks] += np.sum(np.nan_to_num(ends[1] - ends[0]) ** 2, axis=2) * (span * scales[ks]) ** 2 / 12.0
+        _way, weight = self._waypoints(poses, statuses)
+        out[moving] = np.sum((s.first_error_weight * weight[None]) ** 2 * var / s.max_speed_mps ** 2, axis=1)
+        return out
+
+    def _plant_factor(self, motion: PlateMotion, t_s: float) -> np.ndarray:
+        """Per goal (G, 3), the fraction of the model velocity ``motion`` plays over the replanning
+        period from ``t_s``: the uncorrected plants' mean for an unlearned motion until the feedback's
+        first estimate, decaying to 1 as the feedback corrects it; 1 for every other motion."""
+        hit = self._first_error.get(motion.key)
+        if hit is None:
+            return np.ones((len(self.goals), 3))
+        s = self.settings
+        ratio, t0 = hit
+        since = t_s + 0.5 * s.replan_period_s - t0
+        fade = 1.0 if since < s.feedback_first_estimate_s else math.exp(
+            -(since - s.feedback_first_estimate_s) / s.feedback_decay_s)
+        return 1.0 - (1.0 - ratio) * fade
+
+    def _learn_first_error(self, motion: PlateMotion, poses: np.ndarray, velocity: np.ndarray, t_s: float) -> None:
+        """A new motion the feedback has not learned the plant for (the first ``unlearned_motions``
+        of the task): the mean velocity over the plant tolerance's uncorrected plants against the
+        model's, per goal (translation and rotation apart), from one batched solver call."""
+        s = self.settings
+        if motion.is_zero() or s.plant_tolerance is None or self.switches > s.unlearned_motions:
+            return
+        G = len(self.goals)
+        v, ok = self._velocities(uncorrected_motions(motion, self.device, s.plant_tolerance), poses)
+        if not ok.any():
+            return
+        mean = v[ok, :G].mean(axis=0)
+        ratio = np.ones((G, 3))
+        for cols in (slice(0, 2), slice(2, 3)):
+            den = np.sum(velocity[:, cols] ** 2, axis=1)
+            num = np.sum(mean[:, cols] * velocity[:, cols], axis=1)
+            ratio[:, cols] = np.where(den > 1e-12, np.clip(num / np.maximum(den, 1e-12), 0.0, 1.5), 1.0)[:, None]
+        self._first_error[motion.key] = (ratio, t_s)
+
     def _switch(self, t_s, poses, motion, velocity, keep: bool = False) -> PlateMotion | None:
         changed = motion.key != self.current.key
+        velocity = np.nan_to_num(velocity)
+        previous = velocity if keep else self._v_current * self._plant_factor(self.current, t_s)
         if changed:
             self.switches += 1
             self.t_switch = t_s
+            self._learn_first_error(motion, poses, velocity, t_s)
+        velocity = velocity * self._plant_factor(motion, t_s)
+        if keep:
+            previous = velocity
         self.current = motion
-        previous = np.nan_to_num(velocity) if keep else self._v_current
-        self.segment = _Segment(t_s, poses.copy(), np.nan_to_num(velocity), previous, motion.key,
-                                frozenset(self.unseen))
+        self.segment = _Segment(t_s, poses.copy(), velocity, previous, motion.key, frozenset(self.unseen))
         scales = np.array([self.state[g.index].scale for g in self.goals])
         self.last_prediction = {"t_s": t_s, "motion": motion, "poses": poses.copy(), "switched": changed,
-                                "velocity": np.nan_to_num(velocity) * scales[:, None],
+                                "velocity": velocity * scales[:, None],
                                 "previous": previous * scales[:, None], "ramp_s": self.settings.ramp_s}
         return motion if changed else None
 

@@ -3,6 +3,8 @@
 import argparse
 import json
 
+import pytest
+
 from ppod_bench import planner as bench
 
 
@@ -30,4 +32,8 @@ def test_the_multipart_section_runs_both_planners_on_the_same_scenes(tmp_path, c
     mpc = rows[0]
     assert mpc["count"] == 1 and len(mpc["parts"]) == 1 and 0.2 <= mpc["parts"][0]["mu"] <= 0.45
     assert len(mpc["switch_deviation_mm"]) == 1 and mpc["device_s"] <= 16.0
+    # The worst over every switch is the worse of the first two motions' and the later ones'.
+    assert mpc["switch_deviation_mm"][0] == pytest.approx(max(mpc["switch_deviation_first2_mm"][0],
+                                                              mpc["switch_deviation_later_mm"][0]))
+    assert "first two motions median" in out
     assert all(t > 0 for t in mpc["plan_ms"])

@@ -504,7 +504,12 @@ class FieldPlannerNode(PpodLifecycleNode):
         (run, t_s, future), self._pending = self._pending, None
         if run is not self.running:
             return
-        outcome = future.result()
+        try:
+            outcome = future.result()
+        except Exception as exc:  # a planner bug must not kill the node that commands the plate
+            self.get_logger().error(f"planning step raised {type(exc).__name__}: {exc}")
+            self._finish(False, f"planning failed (internal error, {type(exc).__name__}: {exc}); plate stopped")
+            return
         if run.stopped_at is not None:
             stopped_at, stopped_poses = run.stopped_at, run.stopped_poses
             run.stopped_at = run.stopped_poses = None

@@ -299,3 +299,59 @@ def test_a_late_plan_stops_the_plate_at_the_lease_and_is_dropped(ros, monkeypatc
     assert not motion_from_msg(goals[2]).is_zero() and plans[-1] > plans[0] + 1.0
     assert plans[0] <= first < started
     ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
+
+
+def test_a_planner_error_ends_the_goal_and_stops_the_plate_without_killing_the_node(ros, monkeypatch):
+    """An unexpected exception in a planning step (a bug) aborts the goal with the reason and stops
+    the plate; the node lives on and accepts the next goal."""
+    from geometry_msgs.msg import Pose2D
+    from ppod_msgs.action import MoveParts
+    from ppod_msgs.msg import PartPose, PartPoseArray
+    from rclpy.action import ActionClient
+
+    import ppod_nodes.field_planner as fp
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.convert import seconds_to_stamp
+
+    broken = [True]
+
+    class Buggy(fp.MultiTask):
+        def _plan(self, t_s, poses, statuses):
+            if broken[0]:
+                raise ZeroDivisionError("a planner bug")
+            return super()._plan(t_s, poses, statuses)
+
+    monkeypatch.setattr(fp, "MultiTask", Buggy)
+    node = _active(ros, ros.make(fp.FieldPlannerNode))
+    poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
+    t = [0.0]
+
+    def frame() -> None:
+        msg = PartPoseArray()
+        msg.header.stamp = seconds_to_stamp(t[0])
+        p = PartPose(id=7, label="washer", status=PartPose.STATUS_TRACKED)
+        p.pose.x, p.pose.y = -0.04, 0.035
+        msg.parts.append(p)
+        poses_pub.publish(msg)
+        t[0] += 0.1
+        ros.wait_until(lambda: False, 0.1)
+
+    frame()
+    client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
+    assert client.wait_for_server(timeout_sec=10)
+    goal = MoveParts.Goal(part_ids=[7], targets=[Pose2D(x=-0.02, y=0.01)], timeout_s=30.0)
+    handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
+    assert handle.accepted
+    result = handle.get_result_async()
+    for _ in range(50):
+        if result.done():
+            break
+        frame()
+    assert result.done(), "the goal did not end after the planner's error"
+    res = result.result().result
+    assert not res.success and "internal error" in res.reason and "ZeroDivisionError" in res.reason
+    assert node.running is None
+    broken[0] = False  # the node lives on: the next goal runs
+    handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
+    assert handle.accepted
+    ros.wait_future(handle.cancel_goal_async(), 10, "cancel")

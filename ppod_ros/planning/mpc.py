@@ -109,6 +109,10 @@ class MpcSettings:
     stop_ahead: bool = True               # judge the stop where the ramp down leaves the parts, not where they
                                           # are (a bracket stopped 0.4 mm from its goal was carried 2.1 mm and
                                           # 2.7 deg past it by the ramp down, and took 6 s more to come back)
+    scale_from_turn: bool = False         # a part with a goal angle: its velocity scale is learned from its
+                                          # turn (at its footprint's radius) as well as its translation (on:
+                                          # one bracket 20/20 but worst 28.7 s, three parts 18/20; off: 19/20,
+                                          # worst 17.4 s, 19/20 in the same week: docs/planner.md)
     settle_s: float = 0.5                 # within tolerance for this long: reached
     lost_after_s: float = 6.0             # a commanded part unseen this long: failed (touching parts
                                           # are lost by the tracker for a while)
@@ -628,6 +632,13 @@ class MultiTask:
                 continue
             pred = disp[k, :2]
             d = poses[g.index, :2] - seg.poses[g.index, :2]
+            if s.scale_from_turn and g.theta_rad is not None:
+                # The turn too, at the part's radius: learned from the translation alone, a bracket
+                # 8 deg off its goal angle kept the scale 1.82 of a fast turn and, under motions the
+                # model said turn it at 0.2 rad/s, did not turn for 40 s (benchmark scene 15).
+                r = part_radius_m(self.parts[g.index])
+                turn = float(_wrap(poses[g.index, 2] - seg.poses[g.index, 2], self.symmetry[g.index]))
+                pred, d = np.append(pred, r * disp[k, 2]), np.append(d, r * turn)
             n2 = float(pred @ pred)
             if not np.all(np.isfinite(d)) or n2 < s.min_predicted_m ** 2:
                 continue

@@ -615,3 +615,24 @@ def test_the_stop_is_judged_where_the_ramp_down_leaves_the_parts():
     assert not judged(0.0)                          # at the goal, but would stop 2 mm past it
     assert judged(-ramp_m)                          # 2 mm before it: the ramp down ends on it
     assert judged(0.0, stop_ahead=False) and not judged(-ramp_m, stop_ahead=False)
+
+
+def test_the_velocity_scale_can_learn_from_the_turn_of_a_part_with_a_goal_angle():
+    # Benchmark scene 15 (one bracket): 8 deg off its goal angle, under motions the model said turn
+    # it at 0.2 rad/s, the bracket did not turn for 40 s while the scale, learned from the
+    # translation only, stayed at 1.82. With scale_from_turn the missing turn lowers the scale.
+    from ppod_ros.planning.mpc import _Segment
+
+    def scale_after(**overrides) -> float:
+        model = published_rigid_part()
+        task = MultiTask([model], [PartGoal(0, 0.0, 0.0, 0.0)], settings=MpcSettings(**overrides))
+        pose = np.array([[0.0005, 0.0, math.radians(8)]])
+        task.current = template_motion("spin", task, task.goals[0], pose[0])[0]
+        v = np.array([[1e-4, 0.0, -0.2]])            # a slow drift and a turn of 0.2 rad/s
+        task.segment = _Segment(0.0, pose.copy(), v, v, task.current.key)
+        task.state[0].scale = 1.82
+        task._estimate(0.5, pose + [[0.5e-4, 0.0, 0.0]])  # it drifted as predicted but did not turn
+        return task.state[0].scale
+
+    assert scale_after() == pytest.approx(1.82)       # translation only: too short to teach anything
+    assert scale_after(scale_from_turn=True) < 1.0

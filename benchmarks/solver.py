@@ -16,7 +16,10 @@ and rotation) at the given sample grids: wall and CPU seconds, solver calls, con
 and mean periods per configuration. --separation times the simulator's part separation per cycle
 (cell list against the all-pairs reference, which must agree bit for bit). --startup times
 `ppod field config/motions/Sink.yaml --json OUT --quiet` in fresh processes, interleaved with the
-JIT kernel (PPOD_AOT=0), and checks that both write the same field.
+JIT kernel (PPOD_AOT=0), and checks that both write the same field. --planner-motions records the
+motions the model-predictive planner evaluates in closed loop (the multipart scenes) and measures
+the solver on samples of them (the planner's settings, fast, default) against the reference and
+the solve_ivp baseline, point and rigid parts (benchmarks/solver_planner.py).
 
 examples:
   ppod bench solver --quick
@@ -25,6 +28,7 @@ examples:
   ppod bench solver --design 7 15
   ppod bench solver --separation
   ppod bench solver --startup --startup-runs 9
+  ppod bench solver --planner-motions --planner-scenes 1 --planner-samples 4 --baseline-budget 2
   ppod bench solver --out out/bench
   ppod bench solver --baseline-configs 10 --motions Sink LineSinkX
 """
@@ -69,7 +73,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "error against the independent fixed-step reference")
     parser.add_argument("--reference-configs", type=int, default=12, metavar="N",
                         help="configurations per motion checked against the fixed-step reference (default 12)")
-    parser.add_argument("--json", metavar="OUT", help="with --suite: also write the figures as JSON")
+    parser.add_argument("--json", metavar="OUT", help="with --suite or --planner-motions: also write the figures "
+                                                      "as JSON")
     parser.add_argument("--design", type=int, nargs="+", metavar="N",
                         help="only the design section: line sink and rotation designs on N x N sample grids "
                              "(the design's default is 7)")
@@ -85,6 +90,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "ahead-of-time against JIT kernel")
     parser.add_argument("--startup-runs", type=int, default=9, metavar="N",
                         help="processes per variant in the start-up section (default 9)")
+    parser.add_argument("--planner-motions", action="store_true",
+                        help="only the planner-motions section: the solver on the motions the model-predictive "
+                             "planner produces in closed loop, against the reference and a solve_ivp baseline")
+    parser.add_argument("--planner-scenes", type=int, default=2, metavar="N",
+                        help="planner-motions: multipart scenes per count (1 and 3) to record (default 2)")
+    parser.add_argument("--planner-seconds", type=float, default=15.0, metavar="S",
+                        help="planner-motions: device time per recorded scene (default 15)")
+    parser.add_argument("--planner-samples", type=int, default=16, metavar="N",
+                        help="planner-motions: sampled motions per part kind, point and rigid (default 16)")
     parser.add_argument("--no-busy", dest="busy", action="store_false",
                         help="latency section without the busy loop on the other core")
 
@@ -256,6 +270,10 @@ def run(args: argparse.Namespace) -> int:
         return _run_separation(args, out)
     if args.startup:
         return _run_startup(args, out)
+    if args.planner_motions:
+        from ppod_bench.solver_planner import run_planner_motions
+
+        return run_planner_motions(args, out)
     quick = args.quick
     n = 21 if quick else args.grid
     nr = 5 if quick else args.rigid_grid

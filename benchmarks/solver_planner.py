@@ -31,14 +31,16 @@ from pathlib import Path
 
 import numpy as np
 
-#: The classes a planner motion falls in (``motion.name`` up to "@").
-PLANNER_CLASSES = ("sink", "carry", "turn", "spin", "orient", "line", "mpc")
+#: The classes a planner motion falls in (``motion.name`` up to "@"); "mpc": the Gauss-Newton
+#: probes and their results; "design": the template designs the planner makes once (named by their
+#: field spec, e.g. "sink(0, 0, 0.3)").
+PLANNER_CLASSES = ("sink", "carry", "turn", "spin", "orient", "line", "mpc", "design")
 
 
 def motion_class(name: str) -> str:
     """The class of a planner motion by its name: "sink@0" -> "sink", "turn-@1" -> "turn"."""
     base = (name or "mpc").split("@")[0].rstrip("+-")
-    return base if base in PLANNER_CLASSES else "mpc"
+    return base if base in PLANNER_CLASSES else "design"
 
 
 def rigid_baseline_average(motion, part, config, budget_s: float = float("inf"), rtol: float = 1e-8,
@@ -284,6 +286,7 @@ def summary_rows(rows: list[dict]) -> list[list]:
                  f"{max(r['baseline']['err_mps'] for r in rs):.1e}"]
         ratios = [r["ratio"][0] for r in rs if r["ratio"] is not None]
         line.append(f"{'>=' if capped else ''}{min(ratios):.0f} / {np.median(ratios):.0f}" if ratios else "-")
+        line.append(len(rs) - len(ratios))
         table.append(line)
     return table
 
@@ -308,7 +311,8 @@ def run_planner_motions(args, out: Path) -> int:
                   ["part", "class", "motions", "configs", "planner ms/config", "planner max err m/s",
                    "default ms/config", "default max err m/s", "accurate ms/config", "accurate max err m/s",
                    "planner gave up", "baseline s/config",
-                   "baseline max err", "ratio min / median (same configs, equal error)"], summary_rows(rows))
+                   "baseline max err", "ratio min / median (same configs, equal error)",
+                   "no setting at <= baseline err"], summary_rows(rows))
     (out / "solver_planner_motions.txt").write_text(text + "\n", encoding="utf-8")
     if args.json:
         payload = {"load_average": list(load), "calls": len(calls), "motion_evaluations": n_motions, "samples": rows}

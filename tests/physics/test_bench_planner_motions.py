@@ -43,8 +43,8 @@ def test_the_rigid_baseline_stops_at_its_budget_with_a_lower_bound_flag():
 
 def test_planner_motion_names_map_to_their_classes():
     assert [motion_class(n) for n in ("sink@0", "carry@2", "turn-@1", "turn+@0", "spin+@1", "spin", "orient@0",
-                                      "line@0,1", "mpc", "", "rest-ish")] == [
-        "sink", "carry", "turn", "turn", "spin", "spin", "orient", "line", "mpc", "mpc", "mpc"]
+                                      "line@0,1", "mpc", "", "sink(0, 0, 0.3)")] == [
+        "sink", "carry", "turn", "turn", "spin", "spin", "orient", "line", "mpc", "mpc", "design"]
 
 
 def _motion(name, a):

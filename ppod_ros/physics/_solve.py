@@ -446,6 +446,9 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C,
     seg = np.zeros((PERTURB_MAX_PHASES, 6))
     noseg = np.zeros((0, 6))
     nhist = 0  # consecutive converged configurations in hist
+    hcf = np.zeros((EXTRAP_POINTS, dim))  # their closed-form starts (nearly collinear point parts)
+    ncf = 0
+    cfx = np.zeros(dim)
     last_ok = -2
     nb_rate = 1.0
     h = T / (8.0 * kmax)
@@ -553,16 +556,29 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C,
                     xres[0] = lam_start * ex - perp_start * ey
                     xres[1] = lam_start * ey + perp_start * ex
             st = OK
+        has_cf = False
         if not lin and near <= NEAR_COLLINEAR_ENERGY and not has_x0[i]:
-            # Nearly collinear: the closed form along the principal direction is a close start.
+            # Nearly collinear: the closed form along the principal direction is a close start. In
+            # long chunks, along an evenly spaced line, the start is that closed form plus the
+            # neighbours' departures from theirs, extrapolated (smoother than the starts
+            # themselves); the closed form alone misses the transverse slip by many tolerances.
             c1 = line_table(mc, px, py, ex, ey)
             st0, _, lam_start, _, _ = line_solve(
                 c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
                 S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, noseg,
                 P[PP_MU])
             if st0 == OK:
-                x0[0] = lam_start * ex
-                x0[1] = lam_start * ey
+                has_cf = True
+                cfx[0] = lam_start * ex
+                cfx[1] = lam_start * ey
+                if not (long and npts >= 2):
+                    x0[0] = cfx[0]
+                    x0[1] = cfx[1]
+                elif ncf >= npts:
+                    for j in range(dim):
+                        x0[j] = cfx[j]
+                        for k in range(npts):
+                            x0[j] += EXTRAP_WEIGHTS[npts - 1, k] * (hist[k, j] - hcf[k, j])
         if lin and not perturbed:
             c1 = line_table(mc, px, py, ex, ey)
             st, lam_avg, lam_start, periods, _ = line_solve(
@@ -625,8 +641,12 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C,
                 for k in range(EXTRAP_POINTS - 1, 0, -1):
                     for j in range(dim):
                         hist[k, j] = hist[k - 1, j]
+                        hcf[k, j] = hcf[k - 1, j]
                 for j in range(dim):
                     hist[0, j] = xres[j]
+                    hcf[0, j] = cfx[j] if has_cf else 0.0
+                # How many of the newest in hist have their closed-form start in hcf.
+                ncf = (min(ncf + 1, EXTRAP_POINTS) if nhist > 1 else 1) if has_cf else 0
                 last_ok = i
 
 

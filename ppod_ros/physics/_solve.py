@@ -353,7 +353,8 @@ def _scatter_start(Pall, out_status, out_x, lo, i, x0, pick):
     bx = Pall[k2, PP_X] - Pall[k0, PP_X]
     by = Pall[k2, PP_Y] - Pall[k0, PP_Y]
     det = ax * by - ay * bx
-    if abs(det) < SCATTER_PLANE_SIN * math.hypot(ax, ay) * math.hypot(bx, by):
+    # No plane through repeated or collinear configurations (det 0) or a flat triangle.
+    if det == 0.0 or abs(det) < SCATTER_PLANE_SIN * math.hypot(ax, ay) * math.hypot(bx, by):
         return k0
     ex = px - Pall[k0, PP_X]
     ey = py - Pall[k0, PP_Y]
@@ -362,6 +363,9 @@ def _scatter_start(Pall, out_status, out_x, lo, i, x0, pick):
     w = (ax * ey - ay * ex) / det
     for j in range(2):
         x0[j] += u * (out_x[k1, j] - out_x[k0, j]) + w * (out_x[k2, j] - out_x[k0, j])
+    if not (math.isfinite(x0[0]) and math.isfinite(x0[1])):
+        x0[0] = out_x[k0, 0]
+        x0[1] = out_x[k0, 1]
     return k0
 
 

@@ -62,3 +62,24 @@ def test_one_harmonic_minimum_normal_acceleration_is_exact():
             got = min_normal_accel(mc, x, y, m.period_s, 64 * mc.shape[0])
             assert got <= n.min() + 1e-9 * abs(n.min())
             assert abs(got - n.min()) < 1e-6, (name, x, y)
+
+
+def test_repeated_and_collinear_scattered_configurations_stay_finite():
+    """No plane through repeated or collinear configurations (hypothesis found four copies of
+    (0, 0) answered NaN yet flagged valid): they start from the nearest's cycle start."""
+    from ppod_ros.motion import PlateMotion
+    from ppod_ros.parts import PointPart
+
+    m = PlateMotion(frequency_hz=10.0, k=np.array([1]), amplitude=np.array([[1.0, 1.0, 0, 0, 0, 0]]),
+                    phase=np.array([[0.0, 1.0, 0, 0, 0, 0]]))
+    for cfg in ([(0.0, 0.0)] * 4, [(0.0, 0.0), (0.01, 0.0), (0.02, 0.0), (0.0, 0.0), (0.035, 0.0)]):
+        r = solve_field(m, PointPart(1.0), cfg, SolverSettings(cache=False))
+        assert r.valid.all() and np.isfinite(r.velocity).all()
+        one = solve_field(m, PointPart(1.0), cfg[:1], SolverSettings(cache=False))
+        assert np.abs(r.velocity - one.velocity[0]).max() < 1e-6
+    sink = suite_motion("Sink")
+    cfg = [(0.01, 0.02), (0.03, 0.02), (0.01, 0.02), (0.01, 0.02), (-0.02, 0.04), (0.01, 0.02)]
+    r = solve_field(sink, PointPart(0.3), cfg, SolverSettings(cache=False))
+    assert r.valid.all() and np.isfinite(r.velocity).all()
+    same = r.velocity[[0, 2, 3, 5]]
+    assert np.abs(same - same[0]).max() < 2e-6

@@ -99,6 +99,11 @@ PERTURB_MAX_PHASES = 32
 #: 101 x 101 grid (linear: 16), so that one period, with the neighbour's rate prior, often proves
 #: convergence.
 EXTRAP_POINTS = 4
+#: Scattered configurations (small chunks, off any evenly spaced line): the start is the nearest
+#: converged configuration's of the chunk, moved along the plane through the three nearest when
+#: their triangle is not too flat (the sine of its angle at the nearest above this), and the first
+#: steps use that configuration's secant differences.
+SCATTER_PLANE_SIN = 0.2
 EXTRAP_WEIGHTS = np.array([[1.0, 0.0, 0.0, 0.0], [2.0, -1.0, 0.0, 0.0], [3.0, -3.0, 1.0, 0.0],
                            [4.0, -6.0, 4.0, -1.0]])
 
@@ -213,6 +218,8 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
     prev = 1e300
     best = 1e300
     since = 0
+    carried = False
+    more = False
     for it in range(maxp):
         for j in range(n):
             y[j] = 0.0
@@ -268,9 +275,16 @@ def fixed_point(kind, mc, P, x0, T, h, A, B, C, E, E3, S, K, ytmp, ynew, ybest, 
             carry[0] = nc + 1
         if res >= 4.0 * prev:
             q = 0  # diverging: restart the acceleration (plain step below)
+            carried = False
         prev = res
         q = _push(Xh, Fh, q, depth, x, f)
-        if it == 0 and carry[0] >= 1.0 and depth > 0:
+        if it == 0:
+            # Small chunks (scattered configurations, from cold): until Anderson has ``depth``
+            # differences of its own, the carried ones with this map's own appended as they come
+            # (the oldest carried dropped). Long chunks start close enough not to need it.
+            carried = carry[0] >= 1.0 and depth > 0
+            more = carried and S[S_LONG] <= 0.0
+        if carried and (it == 0 or (more and it < depth)):
             _secant_step(CX, CF, int(carry[0]), dim, tolv, x, f)
         else:
             _anderson(Xh, Fh, q, dim, tolv, x)
@@ -300,6 +314,59 @@ def _evenly_spaced(Pall, i, kind, back):
             step = max(step, abs(d1))
             off = max(off, abs(d2 - d1))
     return step > 0.0 and off <= 1e-9 * step
+
+
+@njit(cache=True, error_model="numpy")
+def _scatter_start(Pall, out_status, out_x, lo, i, x0, pick):
+    """Scattered point configurations: x0 <- the start of the nearest converged configuration of
+    this chunk before ``i``, moved along the plane through the three nearest when they span one
+    (not nearly collinear). Returns the nearest's index (-1: none); ``pick`` gets the three."""
+    px = Pall[i, PP_X]
+    py = Pall[i, PP_Y]
+    dbest = np.full(3, 1e300)
+    pick[0] = -1
+    pick[1] = -1
+    pick[2] = -1
+    for k in range(lo, i):
+        if out_status[k] != OK or math.isnan(out_x[k, 0]):
+            continue
+        d = math.hypot(Pall[k, PP_X] - px, Pall[k, PP_Y] - py)
+        if d < dbest[2]:
+            a = 2
+            while a > 0 and d < dbest[a - 1]:
+                dbest[a] = dbest[a - 1]
+                pick[a] = pick[a - 1]
+                a -= 1
+            dbest[a] = d
+            pick[a] = k
+    k0 = pick[0]
+    if k0 < 0:
+        return -1
+    x0[0] = out_x[k0, 0]
+    x0[1] = out_x[k0, 1]
+    if pick[2] < 0:
+        return k0
+    k1 = pick[1]
+    k2 = pick[2]
+    ax = Pall[k1, PP_X] - Pall[k0, PP_X]
+    ay = Pall[k1, PP_Y] - Pall[k0, PP_Y]
+    bx = Pall[k2, PP_X] - Pall[k0, PP_X]
+    by = Pall[k2, PP_Y] - Pall[k0, PP_Y]
+    det = ax * by - ay * bx
+    # No plane through repeated or collinear configurations (det 0) or a flat triangle.
+    if det == 0.0 or abs(det) < SCATTER_PLANE_SIN * math.hypot(ax, ay) * math.hypot(bx, by):
+        return k0
+    ex = px - Pall[k0, PP_X]
+    ey = py - Pall[k0, PP_Y]
+    # (ex, ey) = u (ax, ay) + w (bx, by)
+    u = (ex * by - ey * bx) / det
+    w = (ax * ey - ay * ex) / det
+    for j in range(2):
+        x0[j] += u * (out_x[k1, j] - out_x[k0, j]) + w * (out_x[k2, j] - out_x[k0, j])
+    if not (math.isfinite(x0[0]) and math.isfinite(x0[1])):
+        x0[0] = out_x[k0, 0]
+        x0[1] = out_x[k0, 1]
+    return k0
 
 
 @njit(cache=True, error_model="numpy")
@@ -446,6 +513,13 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C,
     seg = np.zeros((PERTURB_MAX_PHASES, 6))
     noseg = np.zeros((0, 6))
     nhist = 0  # consecutive converged configurations in hist
+    lsx = np.zeros((hi - lo, max(depth, 1), dim))  # each converged row's secant differences
+    lsf = np.zeros((hi - lo, max(depth, 1), dim))
+    lsn = np.zeros(hi - lo, np.int64)
+    pick = np.zeros(3, np.int64)
+    hcf = np.zeros((EXTRAP_POINTS, dim))  # their closed-form starts (nearly collinear point parts)
+    ncf = 0
+    cfx = np.zeros(dim)
     last_ok = -2
     nb_rate = 1.0
     h = T / (8.0 * kmax)
@@ -510,6 +584,9 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C,
                 x0[j] = 0.0
                 for k in range(npts):
                     x0[j] += EXTRAP_WEIGHTS[npts - 1, k] * hist[k, j]
+        near_k = -1
+        if kind == 0 and not long and not has_x0[i] and npts < 2 and S[S_WARM] > 0.0:
+            near_k = _scatter_start(Pall, out_status, out_x, lo, i, x0, pick)
         # The rate prior comes with a warm start from an earlier call (solve_fields), and from the
         # neighbour only in long chunks (large grids): in small calls it would make the number of
         # periods, hence the result within the tolerance, jump as the motion changes slightly
@@ -553,16 +630,29 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C,
                     xres[0] = lam_start * ex - perp_start * ey
                     xres[1] = lam_start * ey + perp_start * ex
             st = OK
+        has_cf = False
         if not lin and near <= NEAR_COLLINEAR_ENERGY and not has_x0[i]:
-            # Nearly collinear: the closed form along the principal direction is a close start.
+            # Nearly collinear: the closed form along the principal direction is a close start. In
+            # long chunks, along an evenly spaced line, the start is that closed form plus the
+            # neighbours' departures from theirs, extrapolated (smoother than the starts
+            # themselves); the closed form alone misses the transverse slip by many tolerances.
             c1 = line_table(mc, px, py, ex, ey)
             st0, _, lam_start, _, _ = line_solve(
                 c1, P[PP_MU], P[PP_MUS], P[PP_CANSTICK] > 0.0, T, ex * x0[0] + ey * x0[1], T / nscan,
                 S[S_ZERO_RTOL] * vscale * 1e-3 + 1e-300, tolv[0], int(S[S_MAX_PERIODS]), stats, noseg,
                 P[PP_MU])
             if st0 == OK:
-                x0[0] = lam_start * ex
-                x0[1] = lam_start * ey
+                has_cf = True
+                cfx[0] = lam_start * ex
+                cfx[1] = lam_start * ey
+                if not (long and npts >= 2):
+                    x0[0] = cfx[0]
+                    x0[1] = cfx[1]
+                elif ncf >= npts:
+                    for j in range(dim):
+                        x0[j] = cfx[j]
+                        for k in range(npts):
+                            x0[j] += EXTRAP_WEIGHTS[npts - 1, k] * (hist[k, j] - hcf[k, j])
         if lin and not perturbed:
             c1 = line_table(mc, px, py, ex, ey)
             st, lam_avg, lam_start, periods, _ = line_solve(
@@ -581,6 +671,14 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C,
                 carry[0] = -1.0 if not (kind == 0 and S[S_WARM] > 0.0) else 0.0
             # A row warm-started from an earlier call takes the secant differences of its own map
             # there (nearly its Jacobian now: the motion changed little), not its neighbour's.
+            if near_k >= 0 and depth > 0:
+                # The nearest's own secant differences (none: the plain first step).
+                nl = lsn[near_k - lo]
+                for a in range(nl):
+                    for j in range(dim):
+                        CX[a, j] = lsx[near_k - lo, a, j]
+                        CF[a, j] = lsf[near_k - lo, a, j]
+                carry[0] = nl
             own = kind == 0 and has_x0[i] and SN0[i] > 0 and S[S_WARM] > 0.0 and depth > 0 and SX0.shape[1] > 0
             if own:
                 nown = min(int(SN0[i]), depth, SX0.shape[1])
@@ -604,6 +702,13 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C,
                         out_sx[i, a, j] = CX[nc - keep + a, j]
                         out_sf[i, a, j] = CF[nc - keep + a, j]
                 out_sn[i] = keep
+            if st == OK and kind == 0 and carry[0] >= 1.0 and depth > 0:
+                nl = int(carry[0])
+                for a in range(nl):
+                    for j in range(dim):
+                        lsx[i - lo, a, j] = CX[a, j]
+                        lsf[i - lo, a, j] = CF[a, j]
+                lsn[i - lo] = nl
             if st != OK:
                 carry[0] = 0.0
             if st == OK and kind == 1 and S[S_STARTS] > 1.5:
@@ -625,8 +730,12 @@ def solve_chunk(kind, mc, Pall, X0, has_x0, R0, SX0, SF0, SN0, T, kmax, A, B, C,
                 for k in range(EXTRAP_POINTS - 1, 0, -1):
                     for j in range(dim):
                         hist[k, j] = hist[k - 1, j]
+                        hcf[k, j] = hcf[k - 1, j]
                 for j in range(dim):
                     hist[0, j] = xres[j]
+                    hcf[0, j] = cfx[j] if has_cf else 0.0
+                # How many of the newest in hist have their closed-form start in hcf.
+                ncf = (min(ncf + 1, EXTRAP_POINTS) if nhist > 1 else 1) if has_cf else 0
                 last_ok = i
 
 

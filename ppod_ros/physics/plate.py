@@ -122,10 +122,14 @@ def min_normal_accel(mc, x, y, period, nscan):
 
     The sample with the smallest value is refined by golden-section search on its two neighbouring
     intervals, so the minimum is found to ~1e-12 relative unless two minima lie within one sample
-    spacing (``nscan`` should be ~32 per harmonic).
+    spacing (``nscan`` should be ~32 per harmonic). A one-harmonic table's minimum is exact,
+    ``g - |(S, C)|``, without sampling.
     """
     if mc.shape[0] == 0:
         return G
+    if mc.shape[0] == 1:
+        # One harmonic: n = g + S sin(k Omega t) + C cos(k Omega t), whose minimum is exact.
+        return G - math.hypot(mc[0, 3] + mc[0, 4] * y - mc[0, 5] * x, mc[0, 9] + mc[0, 10] * y - mc[0, 11] * x)
     best = 1e300
     ibest = 0
     dt = period / nscan

@@ -112,7 +112,8 @@ class MpcSettings:
     scale_from_turn: bool = False         # a part with a goal angle: its velocity scale is learned from its
                                           # turn (at its footprint's radius) as well as its translation (on:
                                           # one bracket 20/20 but worst 28.7 s, three parts 18/20; off: 19/20,
-                                          # worst 17.4 s, 19/20 in the same week: docs/planner.md)
+                                          # worst 17.4 s, 19/20 in the same week: docs/planner.md); only with
+                                          # turn_scale off
     settle_s: float = 0.5                 # within tolerance for this long: reached
     lost_after_s: float = 6.0             # a commanded part unseen this long: failed (touching parts
                                           # are lost by the tracker for a while)

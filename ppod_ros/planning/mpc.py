@@ -112,7 +112,8 @@ class MpcSettings:
     scale_from_turn: bool = False         # a part with a goal angle: its velocity scale is learned from its
                                           # turn (at its footprint's radius) as well as its translation (on:
                                           # one bracket 20/20 but worst 28.7 s, three parts 18/20; off: 19/20,
-                                          # worst 17.4 s, 19/20 in the same week: docs/planner.md)
+                                          # worst 17.4 s, 19/20 in the same week: docs/planner.md); only with
+                                          # turn_scale off
     settle_s: float = 0.5                 # within tolerance for this long: reached
     lost_after_s: float = 6.0             # a commanded part unseen this long: failed (touching parts
                                           # are lost by the tracker for a while)
@@ -160,6 +161,19 @@ class MpcSettings:
                                           # normal force high while the plate turns one way, low the other,
                                           # so a rigid part turns in place (bracket 0.35 rad/s in the model,
                                           # the rotation design 0.045 rad/s)
+    turn_scale: bool = True               # a part with a goal angle has velocity scales for its turn, learned
+                                          # from its turn alone (the translation's from its translation alone):
+                                          # one for every motion (kept in ``scale_range``) and one for the motion
+                                          # playing (in ``turn_scale_range``). Friction slows a turn and a
+                                          # translation differently, and one motion's turn more than another's:
+                                          # the bracket of benchmark scene 15 turned at 0.14 of the model under
+                                          # one motion, 0.9 under the next (the translation scale said 0.4) and
+                                          # overshot its goal angle by 17 deg; one turn scale for every motion
+                                          # kept a motion turning at 0.2 of the model for 15-20 s (scenes 2, 15)
+    min_predicted_turn_rad: float = 0.0175  # predicted turns smaller than this (1 deg, 10 times the tracker's
+                                          # angle noise) teach the turn scales nothing
+    turn_scale_range: tuple[float, float] = (0.1, 4.0)  # the motion playing: a weak turn whose contacts
+                                          # stick turns at 0-0.2 of the model
 
     def __post_init__(self):
         for name in ("replan_period_s", "horizon_s", "frequency_hz", "max_speed_mps", "max_turn_radps",
@@ -429,6 +443,8 @@ class _Tracked:
     time_to_goal_s: float | None = None
     scale: float = 1.0
     estimated: bool = False      # the scale has been estimated from a motion at least once
+    turn: float = 1.0            # the turn's velocity scale over every motion (MpcSettings.turn_scale)
+    turn_now: tuple[bytes, float] | None = None  # ... and under one motion (its key): the one playing
     last_seen: float | None = None
 
 
@@ -632,7 +648,11 @@ class MultiTask:
                 continue
             pred = disp[k, :2]
             d = poses[g.index, :2] - seg.poses[g.index, :2]
-            if s.scale_from_turn and g.theta_rad is not None:
+            st = self.state[g.index]
+            if s.turn_scale and g.theta_rad is not None:
+                self._estimate_turn(st, seg.motion_key, float(disp[k, 2]),
+                                    float(_wrap(poses[g.index, 2] - seg.poses[g.index, 2], self.symmetry[g.index])))
+            elif s.scale_from_turn and g.theta_rad is not None:
                 # The turn too, at the part's radius: learned from the translation alone, a bracket
                 # 8 deg off its goal angle kept the scale 1.82 of a fast turn and, under motions the
                 # model said turn it at 0.2 rad/s, did not turn for 40 s (benchmark scene 15).
@@ -643,9 +663,39 @@ class MultiTask:
             if not np.all(np.isfinite(d)) or n2 < s.min_predicted_m ** 2:
                 continue
             ratio = float(np.clip((d @ pred) / n2, *s.scale_range))
-            st = self.state[g.index]
             st.scale = float(np.clip(st.scale + s.scale_gain * (ratio - st.scale), *s.scale_range))
             st.estimated = True
+
+    def _estimate_turn(self, st: _Tracked, key: bytes, predicted_rad: float, turned_rad: float) -> None:
+        """The turn's velocity scales from one segment of the motion ``key``: the part's turn against
+        the predicted one (``predicted_rad``, ramp included, unscaled), when that is at least
+        ``min_predicted_turn_rad`` (a weak predicted turn says nothing against the tracker's noise);
+        smoothed as the scale. The motion's own scale starts from the part's."""
+        s = self.settings
+        if not (math.isfinite(turned_rad) and abs(predicted_rad) >= s.min_predicted_turn_rad):
+            return
+        ratio = turned_rad / predicted_rad
+        st.turn = float(np.clip(st.turn + s.scale_gain * (ratio - st.turn), *s.scale_range))
+        now = st.turn_now[1] if st.turn_now is not None and st.turn_now[0] == key else st.turn
+        st.turn_now = (key, float(np.clip(now + s.scale_gain * (ratio - now), *s.turn_scale_range)))
+
+    def _axis_scales(self, motions: Sequence[PlateMotion] | None = None) -> np.ndarray:
+        """The velocity scales of x, y and theta per goal (G, 3), or per motion and goal (M, G, 3):
+        the translation's scale; for a part with a goal angle (``turn_scale``), its turn's over every
+        motion, or under the motion itself when it is the one the scale was learned from."""
+        one = motions is None
+        motions = [self.current] if one else motions
+        out = np.array([[self.state[g.index].scale] * 3 for g in self.goals]).reshape(1, len(self.goals), 3)
+        out = np.repeat(out, len(motions), axis=0)
+        if self.settings.turn_scale:
+            for k, g in enumerate(self.goals):
+                st = self.state[g.index]
+                if g.theta_rad is None:
+                    continue
+                out[:, k, 2] = st.turn
+                if st.turn_now is not None:
+                    out[[m.key == st.turn_now[0] for m in motions], k, 2] = st.turn_now[1]
+        return out[0] if one else out
 
     def _fit_friction(self, k: int, g: PartGoal, seg: _Segment, dt: float, poses: np.ndarray,
                       full: PlateMotion) -> None:
@@ -690,11 +740,12 @@ class MultiTask:
                 for g, st in zip(self.goals, statuses))
         a = min(1.0, max(0.0, (t_s - seg.t_s) / s.ramp_s)) if s.ramp_s > 0 else 1.0
         v_now = seg.previous + a * (seg.velocity - seg.previous)
+        scales = self._axis_scales()
         for k, g in enumerate(self.goals):
             p = poses[g.index]
             if not np.all(np.isfinite(p[:2])):
                 return False
-            stop = p + self.state[g.index].scale * v_now[k] * (0.5 * s.ramp_s)
+            stop = p + scales[k] * v_now[k] * (0.5 * s.ramp_s)
             if math.hypot(stop[0] - g.x_m, stop[1] - g.y_m) > f * g.position_tol_m:
                 return False
             if g.theta_rad is not None and abs(_wrap(stop[2] - g.theta_rad, self.symmetry[g.index])) > \
@@ -961,10 +1012,10 @@ class MultiTask:
             previous = velocity
         self.current = motion
         self.segment = _Segment(t_s, poses.copy(), velocity, previous, motion.key, frozenset(self.unseen))
-        scales = np.array([self.state[g.index].scale for g in self.goals])
+        scales = self._axis_scales()
         self.last_prediction = {"t_s": t_s, "motion": motion, "poses": poses.copy(), "switched": changed,
-                                "velocity": velocity * scales[:, None],
-                                "previous": previous * scales[:, None], "ramp_s": self.settings.ramp_s}
+                                "velocity": velocity * scales, "previous": previous * scales,
+                                "ramp_s": self.settings.ramp_s}
         return motion if changed else None
 
     def _waypoints(self, poses: np.ndarray, statuses: list[PartStatus]) -> tuple[np.ndarray, np.ndarray]:
@@ -1034,13 +1085,13 @@ class MultiTask:
         M, G = len(motions), len(self.goals)
         vel_all, ok = self._velocities(motions, poses)
         vel = vel_all[:, :G]
-        scales = np.array([self.state[g.index].scale for g in self.goals])
+        scales = self._axis_scales(motions)
         way, weight = self._waypoints(poses, statuses)
         cur = np.array([poses[g.index] for g in self.goals])
         v_cur = getattr(self, "_v_current", None)
         v_cur = np.zeros((G, 3)) if v_cur is None else v_cur
         r = min(s.ramp_s, H)
-        pred = cur[None] + scales[None, :, None] * (v_cur[None] * (0.5 * r) + vel * (H - 0.5 * r))  # (M, G, 3)
+        pred = cur[None] + scales * (v_cur[None] * (0.5 * r) + vel * (H - 0.5 * r))  # (M, G, 3)
         res_xy = (pred[..., :2] - way[None, :, :2]) * weight[None, :, None]
         oriented = np.array([g.theta_rad is not None for g in self.goals], float)
         res_th = (pred[..., 2] - way[None, :, 2]) * self._angle_weights(statuses)[None] * oriented[None] * weight[None]

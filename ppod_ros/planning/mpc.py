@@ -166,6 +166,7 @@ class MpcSettings:
                                           # taken). Rows that converge within it are bit for bit the same;
                                           # the stick-slip rows of the bracket that hit 1500 steps cost 10-130 ms
                                           # each and made the replanning time's tail (docs/planner.md). 0: no budget
+    budget_fitted: bool = False           # the best candidates fitted into the envelope on that budget too
 
     def __post_init__(self):
         for name in ("replan_period_s", "horizon_s", "frequency_hz", "max_speed_mps", "max_turn_radps",
@@ -781,7 +782,7 @@ class MultiTask:
             or any(not self.state[g.index].estimated for g in self.goals))
         if order:
             fitted = [self._fitted(pool[i]) for i in order]
-            fitted_costs, _ = self._costs(fitted, poses, statuses)
+            fitted_costs, _ = self._costs(fitted, poses, statuses, budget=s.budget_fitted)
             if unlearned:
                 fitted_costs = fitted_costs + self._first_error_costs(fitted, poses, statuses)
                 costs[[i for i in range(1, len(costs)) if i not in order]] = np.inf

@@ -51,7 +51,7 @@ from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.planning.design import _SCALE, DEFAULT_FREQUENCY_HZ, design_field, orient_phasors
 from ppod_ros.planning.envelope import PlantTolerance, fit_envelope, uncorrected_motions
-from ppod_ros.planning.predict import predict_velocities
+from ppod_ros.planning.predict import budgeted, predict_velocities
 from ppod_ros.planning.specs import CENTRE_RADIUS_M, FieldSpec
 from ppod_ros.planning.task import TaskStep
 
@@ -174,6 +174,13 @@ class MpcSettings:
                                           # angle noise) teach the turn scales nothing
     turn_scale_range: tuple[float, float] = (0.1, 4.0)  # the motion playing: a weak turn whose contacts
                                           # stick turns at 0-0.2 of the model
+    probe_max_steps_per_period: int = 200  # the solver's budget for the Gauss-Newton probes and line-search
+    probe_max_periods: int = 12           # trials (the candidates keep PLANNER_SOLVER's 1500 and 40): a row
+                                          # that needs more is out (a probe: no Jacobian column; a trial: not
+                                          # taken). Rows that converge within it are bit for bit the same;
+                                          # the stick-slip rows of the bracket that hit 1500 steps cost 10-130 ms
+                                          # each and made the replanning time's tail (docs/planner.md). 0: no budget
+    budget_fitted: bool = False           # the best candidates fitted into the envelope on that budget too
 
     def __post_init__(self):
         for name in ("replan_period_s", "horizon_s", "frequency_hz", "max_speed_mps", "max_turn_radps",
@@ -190,6 +197,10 @@ class MpcSettings:
             raise ConfigError(f"harmonics: expected 1 or 2, got {self.harmonics!r}")
         if not 0.0 <= self.headroom < 0.5:
             raise ConfigError(f"headroom: expected 0..0.5 (fraction), got {self.headroom!r}")
+        for name in ("probe_max_steps_per_period", "probe_max_periods"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 0):
+                raise ConfigError(f"{name}: expected an integer >= 0 (0: no budget), got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -822,7 +833,7 @@ class MultiTask:
             or any(not self.state[g.index].estimated for g in self.goals))
         if order:
             fitted = [self._fitted(pool[i]) for i in order]
-            fitted_costs, _ = self._costs(fitted, poses, statuses)
+            fitted_costs, _ = self._costs(fitted, poses, statuses, budget=s.budget_fitted)
             if unlearned:
                 fitted_costs = fitted_costs + self._first_error_costs(fitted, poses, statuses)
                 costs[[i for i in range(1, len(costs)) if i not in order]] = np.inf
@@ -1060,10 +1071,11 @@ class MultiTask:
         d = np.array([st.position_error_m if math.isfinite(st.position_error_m) else 0.0 for st in statuses])
         return s.angle_weight_m_per_rad * np.minimum(1.0, s.angle_from_m / np.maximum(d, 1e-9))
 
-    def _costs(self, motions: Sequence[PlateMotion], poses: np.ndarray, statuses: list[PartStatus]
-               ) -> tuple[np.ndarray, np.ndarray]:
-        """Cost (M,) (inf where contact is lost at a commanded part) and model velocities (M, G, 3)."""
-        r, vel, ok = self._residuals(motions, poses, statuses)
+    def _costs(self, motions: Sequence[PlateMotion], poses: np.ndarray, statuses: list[PartStatus],
+               budget: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Cost (M,) (inf where contact is lost at a commanded part) and model velocities (M, G, 3);
+        ``budget``: see :meth:`_velocities`."""
+        r, vel, ok = self._residuals(motions, poses, statuses, budget)
         cost = np.sum(r ** 2, axis=1)
         cost[~ok] = np.inf
         # Never drive a part out of the working disc: a predicted position beyond it (and beyond
@@ -1080,10 +1092,10 @@ class MultiTask:
         cost[out] = np.inf
         return cost, vel
 
-    def _residuals(self, motions, poses, statuses):
+    def _residuals(self, motions, poses, statuses, budget: bool = False):
         s, H = self.settings, self.settings.horizon_s
         M, G = len(motions), len(self.goals)
-        vel_all, ok = self._velocities(motions, poses)
+        vel_all, ok = self._velocities(motions, poses, budget)
         vel = vel_all[:, :G]
         scales = self._axis_scales(motions)
         way, weight = self._waypoints(poses, statuses)
@@ -1115,18 +1127,24 @@ class MultiTask:
             parts.append(np.stack(pen, axis=1))
         return np.concatenate(parts, axis=1) / s.max_speed_mps, vel, ok
 
-    def _velocities(self, motions, poses) -> tuple[np.ndarray, np.ndarray]:
+    def _velocities(self, motions, poses, budget: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Model velocities (M, R, 3) (NaN as 0) of the solved rows (the commanded parts in goal order,
         then the kept-clear others) and validity (M,) at the commanded parts: one batched solver call
-        per part model for the motions not yet solved at these poses. Unseen rows: velocity 0."""
+        per part model for the motions not yet solved at these poses. Unseen rows: velocity 0.
+        ``budget``: the motions not yet solved are solved on the probes' budget
+        (``MpcSettings.probe_max_periods``, ``probe_max_steps_per_period``); a motion solved within it
+        has the result it has without it, one not converged within it is solved again when asked
+        without a budget."""
         G, rows = len(self.goals), self._rows
         R = len(rows)
         pose_key = np.ascontiguousarray(poses[rows]).tobytes()
         if pose_key != self._memo_poses:
             self._memo, self._memo_poses = {}, pose_key
+        settings = self._probe_solver() if budget else None
         new: dict[bytes, PlateMotion] = {}
         for motion in motions:
-            if motion.key not in self._memo:
+            hit = self._memo.get(motion.key)
+            if hit is None or (settings is None and hit[2] and not hit[1]):
                 new.setdefault(motion.key, motion)
         if new:
             todo = list(new.values())
@@ -1137,19 +1155,29 @@ class MultiTask:
                 cfg = np.array([poses[rows[j], :dim] for j in js])
                 seen = np.all(np.isfinite(cfg[:, :2]), axis=1)
                 cfg[~seen] = 0.0
-                v, valid = predict_velocities(todo, part, cfg)
+                v, valid = predict_velocities(todo, part, cfg, settings)
                 v[:, ~seen] = 0.0
                 v_new[:, js, :dim] = v
                 commanded = np.array(js) < G
                 ok_new &= valid[:, commanded].all(axis=1)
             v_new = np.nan_to_num(v_new)
             for motion, v, o in zip(todo, v_new, ok_new):
-                self._memo[motion.key] = (v, bool(o))
+                self._memo[motion.key] = (v, bool(o), settings is not None)
         vel = np.array([self._memo[m.key][0] for m in motions]).reshape(len(motions), R, 3)
         ok = np.array([self._memo[m.key][1] for m in motions], bool)
         return vel, ok
 
+    def _probe_solver(self):
+        """The solver settings of the Gauss-Newton probes and trials (None: PLANNER_SOLVER's)."""
+        s = self.settings
+        if not (s.probe_max_periods or s.probe_max_steps_per_period):
+            return None
+        return budgeted(s.probe_max_periods, s.probe_max_steps_per_period)
+
     def _refine(self, start: PlateMotion, poses, statuses) -> tuple[PlateMotion | None, float]:
+        """Gauss-Newton steps from ``start``: finite-difference probes and line-search trials solved on
+        the probes' budget (``_velocities(..., budget=True)``); a probe not converged within it gives
+        no Jacobian column, a trial not converged within it is not taken."""
         s = self.settings
         freq = start.frequency_hz
         harmonics = s.harmonics
@@ -1160,7 +1188,7 @@ class MultiTask:
         for _ in range(s.gauss_newton_steps):
             probes = [_to_motion(v, freq, harmonics)] + [_to_motion(v + s.fd_step * np.eye(n)[j], freq, harmonics)
                                                          for j in range(n)]
-            r, _vel, ok = self._residuals(probes, poses, statuses)
+            r, _vel, ok = self._residuals(probes, poses, statuses, budget=True)
             if not ok[0]:
                 break
             J = (r[1:] - r[0]).T / s.fd_step                    # (R, n)
@@ -1179,7 +1207,7 @@ class MultiTask:
                     vt = vt * (floor / norm_t)
                 trials.append(_to_motion(vt, freq, harmonics, name="mpc"))
             trials = [fit_envelope(m, self.device, s.headroom, tolerance=s.plant_tolerance)[0] for m in trials]
-            costs, _ = self._costs(trials, poses, statuses)
+            costs, _ = self._costs(trials, poses, statuses, budget=True)
             j = int(np.argmin(costs))
             if not costs[j] < best_cost:
                 break

@@ -37,3 +37,6 @@ def test_the_multipart_section_runs_both_planners_on_the_same_scenes(tmp_path, c
                                                               mpc["switch_deviation_later_mm"][0]))
     assert "first two motions median" in out
     assert all(t > 0 for t in mpc["plan_ms"])
+    # The planning thread's CPU per replanning step beside the wall time (load-independent).
+    assert len(mpc["plan_cpu_ms"]) == len(mpc["plan_ms"]) and all(t > 0 for t in mpc["plan_cpu_ms"])
+    assert "thread CPU median" in out

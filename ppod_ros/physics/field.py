@@ -415,7 +415,7 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
     X0 = np.zeros((M, N, dim))
     R0 = np.ones((M, N))
     has = np.zeros((M, N), np.bool_)
-    wkey = (part.key, skey)
+    wkey = (part.key, settings.warm_key())   # the work caps do not change a converged cycle
     # Each row's own secant differences travel only with warm starts from earlier calls.
     srows = settings.anderson_depth if (store_w is not None and settings.fixed_point == "anderson"
                                         and x_init is None) else 0

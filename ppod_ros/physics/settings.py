@@ -173,6 +173,14 @@ class SolverSettings:
         skip = ("threads", "cache")
         return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip)
 
+    def warm_key(self) -> tuple:
+        """What a converged limit cycle depends on: :meth:`cache_key` without the work caps
+        (``max_periods``, ``max_steps_per_period``). A row either converges within its caps, to the
+        same cycle from the same start, or is not stored as a warm start; so calls that differ only
+        in their caps (the planner's budgeted probes) share their warm starts."""
+        skip = ("threads", "cache", "max_periods", "max_steps_per_period")
+        return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip)
+
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 

@@ -12,7 +12,8 @@ The planner's solver settings (:data:`PLANNER_SOLVER`) are the ``fast`` preset, 
 result cache (every candidate is new) on one thread. The Gauss-Newton probes and trials run on a smaller
 budget (:func:`budgeted`): the same settings with fewer periods and steps per period, so that a row
 either converges within it, to the same result from the same start, or is reported not converged;
-they start from the limit cycles the candidates found (the same warm starts).
+they start from the limit cycles the candidates found (the solver keys warm starts without the work
+caps: ``SolverSettings.warm_key``).
 """
 
 from __future__ import annotations
@@ -25,52 +26,11 @@ import ppod_ros.physics as physics  # solve_fields looked up per call: tests sub
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
-from ppod_ros.physics import PRESETS, SolverSettings, WarmStarts
+from ppod_ros.physics import PRESETS, SolverSettings
 
 #: Solver settings of the planner's small calls: the fast preset, no cache, one thread.
 PLANNER_SOLVER: SolverSettings = PRESETS["fast"].replace(cache=False, threads=1, max_periods=40,
                                                          max_steps_per_period=1500)
-
-
-class _BudgetWarmStarts(WarmStarts):
-    """The process-wide warm starts, shared by a budgeted solve with the unbudgeted one.
-
-    Warm starts are kept per (part, ``settings.cache_key()``), which holds the work caps too, though
-    a row's limit cycle does not depend on them; a budgeted call would then start every probe cold
-    instead of from the cycle the candidates just found at the same configuration. This view maps
-    the budgeted settings' key to ``to``'s (a solver-side key without the caps would make it
-    unnecessary)."""
-
-    def __init__(self, base: WarmStarts, frm: tuple, to: tuple):
-        self._base, self._frm, self._to = base, frm, to
-
-    def _map(self, prefix: tuple) -> tuple:
-        return (prefix[0], self._to) if len(prefix) == 2 and prefix[1] == self._frm else prefix
-
-    def lookup(self, prefix, configs, dim):
-        return self._base.lookup(self._map(prefix), configs, dim)
-
-    def secants(self, prefix, configs, dim, rows):
-        return self._base.secants(self._map(prefix), configs, dim, rows)
-
-    def store(self, prefix, configs, starts, rates, ok, secants=None):
-        self._base.store(self._map(prefix), configs, starts, rates, ok, secants)
-
-    def clear(self) -> None:
-        self._base.clear()
-
-    def __len__(self) -> int:
-        return len(self._base)
-
-
-def _warm_for(settings: SolverSettings):
-    """The warm starts a planner call passes: the process-wide ones, shared with PLANNER_SOLVER's
-    when ``settings`` differs from it only in its work caps (:func:`budgeted`)."""
-    plain = settings.replace(max_periods=PLANNER_SOLVER.max_periods,
-                             max_steps_per_period=PLANNER_SOLVER.max_steps_per_period)
-    if settings == PLANNER_SOLVER or plain != PLANNER_SOLVER:
-        return True
-    return _BudgetWarmStarts(physics.WARM_STARTS, settings.cache_key(), PLANNER_SOLVER.cache_key())
 
 
 def budgeted(max_periods: int, max_steps_per_period: int,
@@ -79,7 +39,7 @@ def budgeted(max_periods: int, max_steps_per_period: int,
     ``max_steps_per_period`` attempted steps per period (each only where lower; 0: unchanged): a
     deterministic bound on the solver's work per row. A row that converges within the budget gives
     the same result as without it from the same start; one that does not is invalid ("not
-    converged"). Budgeted calls share the warm starts of unbudgeted ones (:func:`predict_velocities`)."""
+    converged"). Budgeted calls share the warm starts of unbudgeted ones (``SolverSettings.warm_key``)."""
     base = settings or PLANNER_SOLVER
     for name, v in (("max_periods", max_periods), ("max_steps_per_period", max_steps_per_period)):
         if not (isinstance(v, int) and v >= 0):
@@ -105,9 +65,7 @@ def predict_velocities(motions: Sequence[PlateMotion], part: PointPart | RigidPa
     valid = np.ones((len(motions), cfg.shape[0]), bool)
     moving = [m for m, motion in enumerate(motions) if not motion.is_zero()]
     if moving:
-        warm = _warm_for(settings)
-        kw = {} if warm is True else {"warm": warm}   # (tests substitute a solve_fields without it)
-        r = physics.solve_fields([motions[m] for m in moving], part, cfg, settings=settings, **kw)
+        r = physics.solve_fields([motions[m] for m in moving], part, cfg, settings=settings)
         vel[moving] = np.asarray(r.velocity, float)
         valid[moving] = np.asarray(r.valid, bool)
         vel[moving] = np.where(valid[moving][..., None], vel[moving], np.nan)

@@ -142,3 +142,23 @@ def test_settings_are_validated_and_methods_chosen_by_name():
     assert set(PRESETS) == {"fast", "default", "accurate", "reference"}
     assert SolverSettings().cache_key() != SolverSettings(rtol=1e-7).cache_key()
     assert SolverSettings(threads=1).cache_key() == SolverSettings().cache_key()
+
+
+def test_calls_that_differ_only_in_their_work_caps_share_warm_starts():
+    """A converged limit cycle does not depend on max_periods / max_steps_per_period: a capped
+    call (the planner's budgeted probes) starts from the cycle an uncapped call found, converges in
+    one period, to within the tolerance of the cold answer, and adds no second warm-start entry
+    per configuration."""
+    from ppod_ros.physics import WarmStarts, solve_fields
+
+    base = PRESETS["fast"].replace(cache=False, threads=1)
+    capped = base.replace(max_periods=12, max_steps_per_period=200)
+    assert capped.cache_key() != base.cache_key() and capped.warm_key() == base.warm_key()
+    assert base.replace(rtol=1e-7).warm_key() != base.warm_key()
+    motion, part, cfg = suite_motion("Sink"), PointPart(0.3), np.array([[0.03, 0.01], [-0.02, 0.04]])
+    warm = WarmStarts()
+    cold = solve_fields([motion], part, cfg, settings=base, warm=warm)
+    again = solve_fields([motion], part, cfg, settings=capped, warm=warm)
+    assert cold.periods.min() >= 2 and again.periods.max() == 1
+    assert np.abs(again.velocity - cold.velocity).max() <= 1e-5 * np.abs(cold.velocity).max()
+    assert len(warm) == len(cfg)

@@ -181,6 +181,10 @@ class MpcSettings:
                                           # the stick-slip rows of the bracket that hit 1500 steps cost 10-130 ms
                                           # each and made the replanning time's tail (docs/planner.md). 0: no budget
     budget_fitted: bool = False           # the best candidates fitted into the envelope on that budget too
+    rest_dwell_s: float | None = 0.5     # from the plate at rest (a part out again after the stop: the ramp down
+                                          # carried a bracket stopped 0.86 mm from its goal back to 1.2 mm), the
+                                          # next motion may start this long after the stop (the ramp's end)
+                                          # instead of min_dwell_s (None: min_dwell_s)
     hold_gave_up_m: float = 0.005         # the motion playing, when the solver gives up on it ("not converged"
     hold_gave_up_rad: float = 0.17        # under PLANNER_SOLVER's caps, not contact lost) at a pose within this
                                           # distance and angle (10 deg) of every commanded part's pose where it
@@ -206,6 +210,13 @@ class MpcSettings:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 0):
                 raise ConfigError(f"{name}: expected an integer >= 0 (0: no budget), got {v!r}")
+        for name in ("hold_gave_up_m", "hold_gave_up_rad"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"{name}: must be >= 0 (0: off), got {v!r}")
+        v = self.rest_dwell_s
+        if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            raise ConfigError(f"rest_dwell_s: must be >= 0 s or None (min_dwell_s), got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -877,7 +888,10 @@ class MultiTask:
                 return self._switch(t_s, poses, rest, np.zeros((len(self.goals), 3)))
             return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
         near = all(st.position_error_m <= s.near_m for st in statuses)
-        dwelt = t_s - self.t_switch >= (s.near_dwell_s if near else s.min_dwell_s) - 1e-9
+        dwell = s.near_dwell_s if near else s.min_dwell_s
+        if self.current.is_zero() and s.rest_dwell_s is not None:
+            dwell = s.rest_dwell_s   # the plate at rest: no first error of a motion playing to wait out
+        dwelt = t_s - self.t_switch >= dwell - 1e-9
         if dwelt and self._better(float(final_cost[0]), float(current_cost[0]), poses, statuses):
             return self._switch(t_s, poses, best_motion, final_vel[0])
         return self._switch(t_s, poses, self.current, current_vel[0], keep=True)

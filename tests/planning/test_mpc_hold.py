@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 import ppod_ros.physics as physics
+from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
-from ppod_ros.parts import published_rigid_part
+from ppod_ros.parts import PointPart, published_rigid_part
 from ppod_ros.planning import predict
 from ppod_ros.planning.mpc import MpcSettings, MultiTask, PartGoal, moved, spin_motion
 
@@ -135,3 +136,27 @@ def test_a_replanning_step_keeps_a_motion_the_solver_gave_up_on_in_play(monkeypa
     statuses = task._statuses(0.5, nxt)
     cost, _ = task._costs([playing], nxt, statuses)
     assert math.isfinite(float(cost[0]))
+
+
+@pytest.mark.parametrize("rest_dwell_s, restarts", [(0.5, True), (None, False)])
+def test_from_the_plate_at_rest_the_next_motion_waits_only_for_the_ramp(rest_dwell_s, restarts):
+    """A part out of tolerance after the plate stopped (the ramp down carried it back out) gets its
+    next motion once the ramp is over (MpcSettings.rest_dwell_s), not after min_dwell_s."""
+    task = MultiTask([PointPart(0.3)], [PartGoal(0, 0.0, 0.0)], timeout_s=30.0,
+                     settings=MpcSettings(rest_dwell_s=rest_dwell_s))
+    poses = [[0.03, 0.01, 0.0]]
+    assert task.step(0.0, poses).motion is not None
+    task.plate_stopped(0.2, poses)
+    assert task.current.is_zero() and task.t_switch == 0.2
+    assert task.step(0.3, poses).motion is None          # the ramp down still playing
+    step = task.step(0.8, poses)                         # 0.6 s after the stop: min_dwell_s (1 s) not over
+    assert (step.motion is not None) is restarts
+    if restarts:
+        assert not step.motion.is_zero()
+
+
+def test_rest_dwell_is_validated():
+    with pytest.raises(ConfigError, match="rest_dwell_s"):
+        MpcSettings(rest_dwell_s=-0.1)
+    with pytest.raises(ConfigError, match="hold_gave_up_m"):
+        MpcSettings(hold_gave_up_m=math.nan)

@@ -181,6 +181,15 @@ class MpcSettings:
                                           # the stick-slip rows of the bracket that hit 1500 steps cost 10-130 ms
                                           # each and made the replanning time's tail (docs/planner.md). 0: no budget
     budget_fitted: bool = False           # the best candidates fitted into the envelope on that budget too
+    rest_dwell_s: float | None = 0.5     # from the plate at rest (a part out again after the stop: the ramp down
+                                          # carried a bracket stopped 0.86 mm from its goal back to 1.2 mm), the
+                                          # next motion may start this long after the stop (the ramp's end)
+                                          # instead of min_dwell_s (None: min_dwell_s)
+    hold_gave_up_m: float = 0.005         # the motion playing, when the solver gives up on it ("not converged"
+    hold_gave_up_rad: float = 0.17        # under PLANNER_SOLVER's caps, not contact lost) at a pose within this
+                                          # distance and angle (10 deg) of every commanded part's pose where it
+                                          # last converged: predicted with that last prediction, not ruled out
+                                          # (an inf cost forced a switch away from a motion that works; 0: off)
 
     def __post_init__(self):
         for name in ("replan_period_s", "horizon_s", "frequency_hz", "max_speed_mps", "max_turn_radps",
@@ -201,6 +210,13 @@ class MpcSettings:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 0):
                 raise ConfigError(f"{name}: expected an integer >= 0 (0: no budget), got {v!r}")
+        for name in ("hold_gave_up_m", "hold_gave_up_rad"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"{name}: must be >= 0 (0: off), got {v!r}")
+        v = self.rest_dwell_s
+        if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            raise ConfigError(f"rest_dwell_s: must be >= 0 s or None (min_dwell_s), got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -547,7 +563,13 @@ class MultiTask:
         for j, row in enumerate(self._rows):
             groups.setdefault(tuple(self.parts[row].key), []).append(j)
         self._groups = [(self.parts[self._rows[js[0]]], js) for js in groups.values()]
-        self._memo: dict[bytes, tuple[np.ndarray, bool]] = {}
+        self._memo: dict[bytes, tuple[np.ndarray, bool, bool, bool]] = {}  # key: (velocities, valid, budgeted,
+                                                                           # invalid only as the solver gave up)
+        self._held: tuple[bytes, np.ndarray, np.ndarray] | None = None  # the motion playing: (key, poses of
+                                                                          # the commanded parts, velocities) where
+                                                                          # it last converged
+        self._held_at: bytes | None = None  # the poses (memo key) where the last prediction was held
+        self.held_predictions = 0          # replanning steps that held the motion playing's last prediction
         self._fits: dict[bytes, PlateMotion] = {}
         self._memo_poses: bytes | None = None
         # Per unlearned motion (see MpcSettings.unlearned_motions): the fraction (G, 3) of the model
@@ -800,6 +822,7 @@ class MultiTask:
         self.phase = "moving"
         self._update_focus(t_s, statuses)
         self._v_current = self._current_velocity(poses)
+        self._hold_playing(poses)
         current_cost, current_vel = self._costs([self.current], poses, statuses)
         candidates = [PlateMotion.zero(s.frequency_hz, name="rest")]
         for g, st in zip(self.goals, statuses):
@@ -865,10 +888,52 @@ class MultiTask:
                 return self._switch(t_s, poses, rest, np.zeros((len(self.goals), 3)))
             return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
         near = all(st.position_error_m <= s.near_m for st in statuses)
-        dwelt = t_s - self.t_switch >= (s.near_dwell_s if near else s.min_dwell_s) - 1e-9
+        dwell = s.near_dwell_s if near else s.min_dwell_s
+        if self.current.is_zero() and s.rest_dwell_s is not None:
+            dwell = s.rest_dwell_s   # the plate at rest: no first error of a motion playing to wait out
+        dwelt = t_s - self.t_switch >= dwell - 1e-9
         if dwelt and self._better(float(final_cost[0]), float(current_cost[0]), poses, statuses):
             return self._switch(t_s, poses, best_motion, final_vel[0])
         return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
+
+    def _hold_playing(self, poses: np.ndarray) -> None:
+        """The motion playing at these poses: solved (PLANNER_SOLVER), and where the solver gave up on
+        it ("not converged" at some commanded part, contact kept at the others) within
+        ``hold_gave_up_m`` / ``hold_gave_up_rad`` of every commanded part's pose where it last
+        converged, its model velocities are that last prediction: a stick-slip cycle the solver's
+        caps cut short near a pose where the motion worked is no reason to switch away from it
+        (measured: the bracket's slow benchmark scenes; docs/planner.md). Contact lost is never held."""
+        s = self.settings
+        if self.current.is_zero():
+            self._held = None
+            return
+        vel, ok = self._velocities([self.current], poses)
+        key, G = self.current.key, len(self.goals)
+        cmd = np.array([poses[g.index] for g in self.goals])
+        if ok[0]:
+            self._held = (key, cmd.copy(), vel[0].copy())
+            return
+        held, gave_up = self._held, self._memo[key][3]
+        if not (gave_up and held is not None and held[0] == key and s.hold_gave_up_m > 0):
+            return
+        d = np.hypot(*(cmd[:, :2] - held[1][:, :2]).T)
+        turn = np.abs(_wrap(cmd[:, 2] - held[1][:, 2]))
+        oriented = np.array([g.theta_rad is not None for g in self.goals])
+        if np.all(np.isfinite(d)) and np.all(d <= s.hold_gave_up_m) and np.all(
+                np.where(oriented, np.nan_to_num(turn, nan=np.inf), 0.0) <= s.hold_gave_up_rad):
+            v = vel[0].copy()
+            v[:G] = held[2][:G]
+            self._memo[key] = (v, True, False, False)
+            self._held_at = self._memo_poses
+            self.held_predictions += 1
+
+    def _remember_playing(self, motion: PlateMotion, poses: np.ndarray) -> None:
+        """The motion about to play, solved at these poses (not held): where it last converged."""
+        here = np.ascontiguousarray(poses[self._rows]).tobytes()
+        hit = self._memo.get(motion.key) if here == self._memo_poses else None
+        if motion.is_zero() or hit is None or not hit[1] or self._held_at == here:
+            return
+        self._held = (motion.key, np.array([poses[g.index] for g in self.goals]), hit[0].copy())
 
     def _close(self, st: PartStatus) -> bool:
         """Whether a part is close enough to its goal that the strong templates (STRONG_TEMPLATES)
@@ -1021,6 +1086,7 @@ class MultiTask:
         velocity = velocity * self._plant_factor(motion, t_s)
         if keep:
             previous = velocity
+        self._remember_playing(motion, poses)
         self.current = motion
         self.segment = _Segment(t_s, poses.copy(), velocity, previous, motion.key, frozenset(self.unseen))
         scales = self._axis_scales()
@@ -1150,19 +1216,21 @@ class MultiTask:
             todo = list(new.values())
             v_new = np.zeros((len(todo), R, 3))
             ok_new = np.ones(len(todo), bool)
+            lost_new = np.zeros(len(todo), bool)   # some commanded row invalid for another reason than giving up
             for part, js in self._groups:
                 dim = 3 if isinstance(part, RigidPart) else 2
                 cfg = np.array([poses[rows[j], :dim] for j in js])
                 seen = np.all(np.isfinite(cfg[:, :2]), axis=1)
                 cfg[~seen] = 0.0
-                v, valid = predict_velocities(todo, part, cfg, settings)
+                v, valid, gave_up = predict_velocities(todo, part, cfg, settings, gave_up=True)
                 v[:, ~seen] = 0.0
                 v_new[:, js, :dim] = v
                 commanded = np.array(js) < G
                 ok_new &= valid[:, commanded].all(axis=1)
+                lost_new |= (~valid[:, commanded] & ~gave_up[:, commanded]).any(axis=1)
             v_new = np.nan_to_num(v_new)
-            for motion, v, o in zip(todo, v_new, ok_new):
-                self._memo[motion.key] = (v, bool(o), settings is not None)
+            for motion, v, o, lost in zip(todo, v_new, ok_new, lost_new):
+                self._memo[motion.key] = (v, bool(o), settings is not None, not o and not lost)
         vel = np.array([self._memo[m.key][0] for m in motions]).reshape(len(motions), R, 3)
         ok = np.array([self._memo[m.key][1] for m in motions], bool)
         return vel, ok

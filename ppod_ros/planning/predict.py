@@ -26,7 +26,7 @@ import ppod_ros.physics as physics  # solve_fields looked up per call: tests sub
 from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
-from ppod_ros.physics import PRESETS, SolverSettings
+from ppod_ros.physics import PRESETS, REASONS, SolverSettings
 
 #: Solver settings of the planner's small calls: the fast preset, no cache, one thread.
 PLANNER_SOLVER: SolverSettings = PRESETS["fast"].replace(cache=False, threads=1, max_periods=40,
@@ -49,10 +49,16 @@ def budgeted(max_periods: int, max_steps_per_period: int,
                                                  max_steps_per_period or base.max_steps_per_period))
 
 
+#: Reason codes of a row the solver gave up on under its work caps (not a property of the motion).
+GAVE_UP_CODES: tuple[int, ...] = tuple(c for c, text in REASONS.items() if text and text.startswith("not converged"))
+
+
 def predict_velocities(motions: Sequence[PlateMotion], part: PointPart | RigidPart, configs,
-                       settings: SolverSettings | None = None) -> tuple[np.ndarray, np.ndarray]:
+                       settings: SolverSettings | None = None, *, gave_up: bool = False):
     """Velocities (M, N, dim) (NaN where invalid) and validity (M, N) of ``part`` at ``configs``
-    ((N, dim): [x, y] or [x, y, theta]) under each of ``motions``."""
+    ((N, dim): [x, y] or [x, y, theta]) under each of ``motions``. ``gave_up``: a third array (M, N),
+    true where a row is invalid only because the solver gave up under its caps ("not converged",
+    :data:`GAVE_UP_CODES`), not because contact is lost."""
     motions = list(motions)
     if not motions:
         raise ConfigError("motions: expected at least one plate motion")
@@ -63,13 +69,17 @@ def predict_velocities(motions: Sequence[PlateMotion], part: PointPart | RigidPa
         raise ConfigError(f"configs: expected shape (N, {dim}) for a {part.kind} part, got {cfg.shape}")
     vel = np.zeros((len(motions), cfg.shape[0], dim))
     valid = np.ones((len(motions), cfg.shape[0]), bool)
+    unconverged = np.zeros((len(motions), cfg.shape[0]), bool)
     moving = [m for m, motion in enumerate(motions) if not motion.is_zero()]
     if moving:
         r = physics.solve_fields([motions[m] for m in moving], part, cfg, settings=settings)
         vel[moving] = np.asarray(r.velocity, float)
         valid[moving] = np.asarray(r.valid, bool)
         vel[moving] = np.where(valid[moving][..., None], vel[moving], np.nan)
-    return vel, valid
+        codes = getattr(r, "reason_code", None)   # (tests substitute a solve_fields without it)
+        if codes is not None:
+            unconverged[moving] = ~valid[moving] & np.isin(np.asarray(codes), GAVE_UP_CODES)
+    return (vel, valid, unconverged) if gave_up else (vel, valid)
 
 
-__all__ = ["PLANNER_SOLVER", "budgeted", "predict_velocities"]
+__all__ = ["GAVE_UP_CODES", "PLANNER_SOLVER", "budgeted", "predict_velocities"]

@@ -302,9 +302,9 @@ def test_equal_part_models_share_one_solver_call_and_a_step_solves_each_motion_o
     calls = []
     real = mpc.predict_velocities
 
-    def counting(motions, part, configs, settings=None):
+    def counting(motions, part, configs, settings=None, **kw):
         calls.append((part.kind, len(configs), tuple(m.key for m in motions), part.key))
-        return real(motions, part, configs, settings)
+        return real(motions, part, configs, settings, **kw)
 
     monkeypatch.setattr(mpc, "predict_velocities", counting)
     task = MultiTask([bracket, washer, washer], [PartGoal(0, 0.02, -0.02, 0.0), PartGoal(1, -0.03, 0.03),

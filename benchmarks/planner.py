@@ -313,17 +313,15 @@ def _switch_deviations(records: list, run, goals, first: int | None = None) -> l
     return worst
 
 
-def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float) -> tuple[list[dict], list]:
+def multipart_models() -> tuple[dict, dict]:
+    """The default scene's parts by label, and the planner's part models of ``MULTI_LABELS`` (from
+    the tracker file's part types; a label it gives no part gets the scene's part at friction 0.3)."""
     import importlib.resources as resources
-    import multiprocessing
 
     from ppod_ros.config.fields import load_yaml_file
     from ppod_ros.parts import part_from_dict
-    from ppod_ros.planning import Task
-    from ppod_ros.planning.mpc import MultiTask, PartGoal
-    from ppod_ros.planning.simulate import ActuatorPlantError, run_on_dynamics
     from ppod_sim.ros_node import default_scene_path
-    from ppod_sim.scene import ScenePart, load_scene
+    from ppod_sim.scene import load_scene
 
     templates = {p.label: p for p in load_scene(default_scene_path()).parts}
     tracker = load_yaml_file(str(resources.files("ppod_ros") / "data" / "tracker.yaml"), "tracker")
@@ -332,6 +330,18 @@ def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float)
         if item["label"] in MULTI_LABELS:
             models[item["label"]] = (part_from_dict(item["part"]) if item.get("part") is not None
                                      else _true_part(templates[item["label"]].part, 0.3))
+    return templates, models
+
+
+def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float) -> tuple[list[dict], list]:
+    import multiprocessing
+
+    from ppod_ros.planning import Task
+    from ppod_ros.planning.mpc import MultiTask, PartGoal
+    from ppod_ros.planning.simulate import ActuatorPlantError, run_on_dynamics
+    from ppod_sim.scene import ScenePart
+
+    templates, models = multipart_models()
     busy = multiprocessing.get_context("spawn").Process(target=_busy, args=(time.time() + 3600.0,), daemon=True)
     busy.start()
     rows, paths = [], []

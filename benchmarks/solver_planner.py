@@ -127,22 +127,13 @@ def collect_planner_calls(counts, scenes: int, seconds: float, seed: int = 0) ->
     """Run the model-predictive planner closed loop on the multipart benchmark's first ``scenes``
     scenes per count for ``seconds`` of device time; return every solver call it made as
     (motions, part, configs)."""
-    import importlib.resources as resources
-
     import ppod_ros.physics as physics
     from ppod_bench import planner as bp
-    from ppod_ros.config.fields import load_yaml_file
-    from ppod_ros.parts import part_from_dict
     from ppod_ros.planning.mpc import MultiTask, PartGoal
     from ppod_ros.planning.simulate import ActuatorPlantError, run_on_dynamics
-    from ppod_sim.ros_node import default_scene_path
-    from ppod_sim.scene import ScenePart, load_scene
+    from ppod_sim.scene import ScenePart
 
-    templates = {p.label: p for p in load_scene(default_scene_path()).parts}
-    tracker = load_yaml_file(str(resources.files("ppod_ros") / "data" / "tracker.yaml"), "tracker")
-    declared = {item["label"]: item.get("part") for item in tracker["parts"]}
-    models = {lb: part_from_dict(declared[lb]) if declared.get(lb) is not None
-              else bp._true_part(templates[lb].part, 0.3) for lb in bp.MULTI_LABELS}
+    templates, models = bp.multipart_models()
     calls = []
     real = physics.solve_fields
 

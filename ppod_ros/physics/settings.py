@@ -168,18 +168,19 @@ class SolverSettings:
             raise ConfigError(f"settings: unknown option(s) {sorted(unknown)}")
         return dataclasses.replace(self, **changes)
 
+    def _values_but(self, *skip: str) -> tuple:
+        return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip)
+
     def cache_key(self) -> tuple:
         """Everything that can change a result (not threads or the cache switch)."""
-        skip = ("threads", "cache")
-        return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip)
+        return self._values_but("threads", "cache")
 
     def warm_key(self) -> tuple:
         """What a converged limit cycle depends on: :meth:`cache_key` without the work caps
         (``max_periods``, ``max_steps_per_period``). A row either converges within its caps, to the
         same cycle from the same start, or is not stored as a warm start; so calls that differ only
         in their caps (the planner's budgeted probes) share their warm starts."""
-        skip = ("threads", "cache", "max_periods", "max_steps_per_period")
-        return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip)
+        return self._values_but("threads", "cache", "max_periods", "max_steps_per_period")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -765,12 +765,14 @@ class MultiTask:
         now (the segment's, ramp included, times the part's scale) over half the ramp."""
         s = self.settings
         f = s.stop_within
+
+        def well(g: PartGoal, position_m: float, angle_rad: float | None) -> bool:
+            return position_m <= f * g.position_tol_m and (angle_rad is None or abs(angle_rad) <= f * g.angle_tol_rad)
+
         seg = self.segment
         if not (s.stop_ahead and poses is not None and seg is not None and seg.motion_key == self.current.key
                 and not self.current.is_zero()):
-            return all(st.position_error_m <= f * g.position_tol_m and (
-                st.angle_error_rad is None or abs(st.angle_error_rad) <= f * g.angle_tol_rad)
-                for g, st in zip(self.goals, statuses))
+            return all(well(g, st.position_error_m, st.angle_error_rad) for g, st in zip(self.goals, statuses))
         a = min(1.0, max(0.0, (t_s - seg.t_s) / s.ramp_s)) if s.ramp_s > 0 else 1.0
         v_now = seg.previous + a * (seg.velocity - seg.previous)
         scales = self._axis_scales()
@@ -779,10 +781,10 @@ class MultiTask:
             if not np.all(np.isfinite(p[:2])):
                 return False
             stop = p + scales[k] * v_now[k] * (0.5 * s.ramp_s)
-            if math.hypot(stop[0] - g.x_m, stop[1] - g.y_m) > f * g.position_tol_m:
-                return False
-            if g.theta_rad is not None and abs(_wrap(stop[2] - g.theta_rad, self.symmetry[g.index])) > \
-                    f * g.angle_tol_rad:
+            angle = None if g.theta_rad is None else float(_wrap(stop[2] - g.theta_rad, self.symmetry[g.index]))
+            if angle is not None and not math.isfinite(angle):
+                angle = None   # an unseen angle: judged by its position
+            if not well(g, math.hypot(stop[0] - g.x_m, stop[1] - g.y_m), angle):
                 return False
         return True
 
@@ -929,7 +931,7 @@ class MultiTask:
 
     def _remember_playing(self, motion: PlateMotion, poses: np.ndarray) -> None:
         """The motion about to play, solved at these poses (not held): where it last converged."""
-        here = np.ascontiguousarray(poses[self._rows]).tobytes()
+        here = self._pose_key(poses)
         hit = self._memo.get(motion.key) if here == self._memo_poses else None
         if motion.is_zero() or hit is None or not hit[1] or self._held_at == here:
             return
@@ -1193,6 +1195,10 @@ class MultiTask:
             parts.append(np.stack(pen, axis=1))
         return np.concatenate(parts, axis=1) / s.max_speed_mps, vel, ok
 
+    def _pose_key(self, poses: np.ndarray) -> bytes:
+        """The solved rows' poses as the key of the per-step memo of model velocities."""
+        return np.ascontiguousarray(poses[self._rows]).tobytes()
+
     def _velocities(self, motions, poses, budget: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Model velocities (M, R, 3) (NaN as 0) of the solved rows (the commanded parts in goal order,
         then the kept-clear others) and validity (M,) at the commanded parts: one batched solver call
@@ -1203,7 +1209,7 @@ class MultiTask:
         without a budget."""
         G, rows = len(self.goals), self._rows
         R = len(rows)
-        pose_key = np.ascontiguousarray(poses[rows]).tobytes()
+        pose_key = self._pose_key(poses)
         if pose_key != self._memo_poses:
             self._memo, self._memo_poses = {}, pose_key
         settings = self._probe_solver() if budget else None
@@ -1218,7 +1224,7 @@ class MultiTask:
             ok_new = np.ones(len(todo), bool)
             lost_new = np.zeros(len(todo), bool)   # some commanded row invalid for another reason than giving up
             for part, js in self._groups:
-                dim = 3 if isinstance(part, RigidPart) else 2
+                dim = _dim(part)
                 cfg = np.array([poses[rows[j], :dim] for j in js])
                 seen = np.all(np.isfinite(cfg[:, :2]), axis=1)
                 cfg[~seen] = 0.0

@@ -42,6 +42,7 @@ examples:
   ppod bench planner --quick
   ppod bench planner --sections design physics --out out/bench
   ppod bench planner --sections multipart --counts 1 3 --scenes 20
+  ppod bench planner --sections multipart --counts 1 --scenes 20 --only-scenes 2 16 --planners mpc
 """
 
 from __future__ import annotations
@@ -71,6 +72,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--counts", nargs="+", type=int, default=[1, 2, 3, 4], choices=[1, 2, 3, 4],
                         help="multipart: counts of parts (default 1 2 3 4)")
     parser.add_argument("--scene-seconds", type=float, default=60.0, help="multipart: device time per scene")
+    parser.add_argument("--planners", nargs="+", choices=["mpc", "template"], default=["mpc", "template"],
+                        help="multipart: which planners to run (default both, in the same run)")
+    parser.add_argument("--only-scenes", nargs="+", type=int, default=None, metavar="N",
+                        help="multipart: run only these scene numbers (0-based; the scenes are the same as in "
+                             "the full run)")
     parser.add_argument("--quick", action="store_true", help="fewer designs, starts and seconds")
     parser.add_argument("--seed", type=int, default=0, help="tracker-noise seed (default 0)")
 
@@ -333,7 +339,9 @@ def multipart_models() -> tuple[dict, dict]:
     return templates, models
 
 
-def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float) -> tuple[list[dict], list]:
+def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float,
+                    planners: tuple[str, ...] = ("mpc", "template"),
+                    only: list[int] | None = None) -> tuple[list[dict], list]:
     import multiprocessing
 
     from ppod_ros.planning import Task
@@ -349,7 +357,9 @@ def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float)
         for count in counts:
             rng = np.random.default_rng(1000 * seed + count)
             for n in range(n_scenes):
-                sc = _multi_scene(count, rng, templates)
+                sc = _multi_scene(count, rng, templates)  # drawn for every scene: the same scenes either way
+                if only is not None and n not in only:
+                    continue
                 labels = sc["labels"]
                 model_parts = [models[lb] for lb in labels]
                 true_parts = [_true_part(templates[lb].part, mu) for lb, mu in zip(labels, sc["mu"])]
@@ -358,7 +368,7 @@ def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float)
                 pos_tol, ang_tol = (1e-3, math.radians(2)) if count == 1 else (2e-3, math.radians(3))
                 goals = [PartGoal(i, g[0], g[1], sc["goal_theta"] if lb == "bracket" else None, pos_tol, ang_tol)
                          for i, (lb, g) in enumerate(zip(labels, sc["goals"]))]
-                for planner in ("mpc", "template"):
+                for planner in planners:
                     if planner == "mpc":
                         task = MultiTask(model_parts, goals, timeout_s=scene_s)
                         records, plan_cpu = [], []
@@ -443,7 +453,8 @@ def run(args: argparse.Namespace) -> int:
               f"scenes per count {args.counts} (see --help for the loop):")
         result["multipart"], paths["multipart"] = bench_multipart(
             list(getattr(args, "counts", [1, 2, 3, 4])), int(getattr(args, "scenes", 2)), args.seed,
-            float(getattr(args, "scene_seconds", 60.0)))
+            float(getattr(args, "scene_seconds", 60.0)), tuple(getattr(args, "planners", ("mpc", "template"))),
+            getattr(args, "only_scenes", None))
     if "physics" in args.sections:
         print("Parts physics of the simulated device (no device process, ROS or camera), sink at the centre:")
         result["physics"] = bench_physics(args.quick)

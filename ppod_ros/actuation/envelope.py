@@ -107,8 +107,8 @@ REFINE_ZOOM = 16
 def _vertex(ym: np.ndarray, y0: np.ndarray, yp: np.ndarray, step: float) -> np.ndarray:
     """Offset (rad) of the vertex of the parabola through (-step, ym), (0, y0), (step, yp), within +-step."""
     curvature = ym - 2.0 * y0 + yp
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d = np.where(curvature < 0, 0.5 * step * (ym - yp) / curvature, 0.0)
+    # Divided only where the parabola opens downwards (no warnings, no errstate context per call).
+    d = np.divide(0.5 * step * (ym - yp), curvature, out=np.zeros_like(curvature), where=curvature < 0)
     return np.clip(d, -step, step)
 
 
@@ -136,7 +136,8 @@ def refined_max(fn, n_samples: int) -> np.ndarray:
     C = y.shape[1]
     cols = np.arange(C)
     step = 2.0 * math.pi / n_samples
-    left, right = np.roll(y, 1, axis=0), np.roll(y, -1, axis=0)
+    left = np.concatenate((y[-1:], y[:-1]))   # np.roll(y, 1, axis=0) without its per-call overhead
+    right = np.concatenate((y[1:], y[:1]))   # np.roll(y, -1, axis=0)
     score = np.where((y >= left) & (y >= right), y, -np.inf)
     idx = np.argsort(-score, axis=0)[: min(REFINE_CANDIDATES, n_samples)]  # (n_cand, C)
     centres = theta[idx] + _vertex(left[idx, cols], y[idx, cols], right[idx, cols], step)
@@ -179,14 +180,13 @@ def motion_extremes_many(phasors: np.ndarray, k: np.ndarray, radius_m: float) ->
 
     def fn(theta: np.ndarray) -> np.ndarray:
         u = synthesize(table, k, theta).reshape(theta.size, S, 6)
-        return np.stack(
-            [
-                np.linalg.norm(u[..., :3], axis=2),
-                np.linalg.norm(u[..., 3:], axis=2),
-                radius_m * np.hypot(u[..., 3], u[..., 4]) - u[..., 2],  # the loss of normal acceleration
-            ],
-            axis=2,
-        ).reshape(theta.size, S * 3)
+        out = np.empty((theta.size, S, 3))
+        lin, ang = u[..., :3], u[..., 3:]
+        # |.| as np.linalg.norm computes it (sqrt of the sum of squares), without its per-call overhead.
+        np.sqrt(np.add.reduce(lin * lin, axis=2), out=out[..., 0])
+        np.sqrt(np.add.reduce(ang * ang, axis=2), out=out[..., 1])
+        out[..., 2] = radius_m * np.hypot(u[..., 3], u[..., 4]) - u[..., 2]  # the loss of normal acceleration
+        return out.reshape(theta.size, S * 3)
 
     peaks = refined_max(fn, n).reshape(S, 3)
     out[:, :2] = peaks[:, :2]

@@ -59,6 +59,10 @@ class Mode:
     damping_ratio: float
 
 
+#: Sets of frequencies whose state-space solve :meth:`NominalPlant.responses` remembers.
+_SOLVED_CACHE = 64
+
+
 class NominalPlant:
     """The linear nominal model of the device (see the module docstring).
 
@@ -78,6 +82,7 @@ class NominalPlant:
 
     def __init__(self, config: DeviceConfig):
         self.config = config
+        self._solved: dict[tuple, np.ndarray] = {}   # responses(): (s I - A)^-1 B per set of frequencies
         a = config.actuators
         fl = config.flexures
         self.kinematics = StewartKinematics(config.geometry)
@@ -108,6 +113,7 @@ class NominalPlant:
         B[i, 12:18] = I6 / L
         A[z, i] = -I6
         B[z, 0:6] = I6
+        A.flags.writeable = B.flags.writeable = False   # fixed: responses() remembers its solves
         self.A, self.B = A, B
         self._outputs = self._output_maps()
 
@@ -156,10 +162,19 @@ class NominalPlant:
         return self.responses(freq_hz, (output,))[output]
 
     def responses(self, freq_hz, outputs: tuple[str, ...] = OUTPUTS) -> dict[str, np.ndarray]:
-        """Frequency responses of several outputs from one solve: {name: (..., 6, 6)}."""
+        """Frequency responses of several outputs from one solve: {name: (..., 6, 6)}.
+
+        The solve is remembered per set of frequencies (the checker asks for the same few harmonics
+        of one frequency for every motion it checks); callers get their own copies."""
         f = self._freqs(freq_hz)
-        s = 2j * math.pi * f[..., None, None]
-        X = np.linalg.solve(s * np.eye(NX) - self.A, np.broadcast_to(self.B[:, :6], f.shape + (NX, 6)))
+        key = (f.shape, f.tobytes())
+        X = self._solved.get(key)
+        if X is None:
+            s = 2j * math.pi * f[..., None, None]
+            X = np.linalg.solve(s * np.eye(NX) - self.A, np.broadcast_to(self.B[:, :6], f.shape + (NX, 6)))
+            if len(self._solved) >= _SOLVED_CACHE:
+                self._solved.clear()
+            self._solved[key] = X
         out = {}
         for name in outputs:
             Cy, Dy = self.output_matrices(name)

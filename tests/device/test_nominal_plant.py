@@ -23,6 +23,25 @@ def test_frequency_response_has_the_documented_shape_and_broadcasts():
     assert np.allclose(G[0, 1], PLANT.frequency_response(30.0))
 
 
+def test_remembered_solves_equal_a_fresh_solve_and_callers_cannot_change_them():
+    # responses() remembers (sI - A)^-1 B per set of frequencies (the checker asks for the same few
+    # harmonics for every motion): the answer is the fresh solve's, bit for bit, and what a caller does
+    # to its copy never reaches the next caller; the state space it was solved from cannot change.
+    plant = NominalPlant(CFG)
+    f = np.array([30.0, 60.0])
+    s = 2j * math.pi * f[:, None, None]
+    X = np.linalg.solve(s * np.eye(plant.A.shape[0]) - plant.A, np.broadcast_to(plant.B[:, :6], (2,) + (plant.A.shape[0], 6)))
+    Cy, Dy = plant.output_matrices("accel")
+    first = plant.responses(f, ("accel", "voltage"))
+    assert np.array_equal(first["accel"], Cy @ X + Dy[:, :6])
+    first["accel"][:] = 0.0
+    again = plant.responses(f.copy(), ("accel",))["accel"]
+    assert np.array_equal(again, Cy @ X + Dy[:, :6])
+    assert not np.array_equal(plant.response(np.array([30.0, 90.0]))[1], again[1])   # keyed by the frequencies
+    with pytest.raises(ValueError):
+        plant.A[0, 0] = 1.0
+
+
 def test_frequency_response_rejects_non_positive_frequencies():
     for bad in (0.0, -30.0, math.nan):
         with pytest.raises(ConfigError, match="freq_hz"):

@@ -135,11 +135,16 @@ def corrected_motion_ratios(motion: PlateMotion, device, tolerance: PlantToleran
 
 
 def fit_envelope(motion: PlateMotion, device, headroom: float = 0.15, step: float = RETRY_STEP,
-                 tolerance: PlantTolerance | None = None) -> tuple[PlateMotion, float]:
+                 tolerance: PlantTolerance | None = None, *, recheck: bool = True) -> tuple[PlateMotion, float]:
     """``motion`` scaled down until the device envelope holds with ``headroom`` under every limit
     (every ratio <= 1 - headroom) and, with ``tolerance``, the plate motion limits hold with the same
     headroom for the corrected tables of the plants within it; returns (motion, scale). LimitError
-    naming the limit when no scale fits (a row at a forbidden frequency)."""
+    naming the limit when no scale fits (a row at a forbidden frequency).
+
+    The ratios are linear in amplitude but for the exact leg stroke's second-order terms, so the
+    scale they give is checked again on the scaled motion (and shrunk by ``step`` until it passes).
+    ``recheck=False`` returns that first scale unchecked: an estimate for ranking motions, never for
+    playing one (the planner fits the motion it sends with ``recheck=True``)."""
     if not 0.0 <= headroom < 0.5:
         raise ConfigError(f"headroom: expected 0 <= headroom < 0.5 (fraction), got {headroom!r}")
     if motion.is_zero():
@@ -157,9 +162,13 @@ def fit_envelope(motion: PlateMotion, device, headroom: float = 0.15, step: floa
     robust = 0.0 if tolerance is None else (max(corrected_motion_ratios(motion, device, tolerance).values())
                                             / (1.0 + allowance))
     worst = max(worst, robust)
-    scale = 1.0 if worst <= max_ratio else max_ratio / worst
+    if worst <= max_ratio:
+        return motion, 1.0   # within as it is: the checker's report above is the candidate's own
+    scale = max_ratio / worst
+    if not recheck:
+        return motion.scaled(scale), scale
     for _ in range(20):
-        candidate = motion if scale == 1.0 else motion.scaled(scale)
+        candidate = motion.scaled(scale)
         report = envelope.check_motion(candidate)
         if report.within(max_ratio):
             return candidate, scale

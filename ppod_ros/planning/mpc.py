@@ -1280,7 +1280,10 @@ class MultiTask:
                 if 0 < norm_t < floor:
                     vt = vt * (floor / norm_t)
                 trials.append(_to_motion(vt, freq, harmonics, name="mpc"))
-            trials = [fit_envelope(m, self.device, s.headroom, tolerance=s.plant_tolerance)[0] for m in trials]
+            # Ranked at the scale the checker's ratios give (no second check of each scaled trial):
+            # the motion chosen is fitted and checked in full before it is played (_plan).
+            trials = [fit_envelope(m, self.device, s.headroom, tolerance=s.plant_tolerance, recheck=False)[0]
+                      for m in trials]
             costs, _ = self._costs(trials, poses, statuses, budget=True)
             j = int(np.argmin(costs))
             if not costs[j] < best_cost:

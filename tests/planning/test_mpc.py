@@ -211,6 +211,25 @@ def test_envelope_keeps_headroom_under_every_limit():
         envelope.fit_envelope(small, device, 0.7)
 
 
+def test_an_unchecked_fit_ranks_at_the_checkers_first_scale_and_the_full_fit_then_passes():
+    # recheck=False (the planner's line-search trials) gives the scale the checker's ratios give at full
+    # amplitude without checking the scaled motion again; the full fit of that motion, which the planner
+    # applies to the motion it plays, is within the headroom by the checker itself.
+    from ppod_ros.actuation.envelope import Envelope
+
+    device = default_device_config()
+    big = PlateMotion.single(30.0, [30.0, 0, 10.0, 0, 200.0, 0], [0, 0, math.pi / 2, 0, -math.pi / 2, 0])
+    tol = envelope.PlantTolerance()
+    quick, quick_scale = envelope.fit_envelope(big, device, 0.15, tolerance=tol, recheck=False)
+    full, full_scale = envelope.fit_envelope(big, device, 0.15, tolerance=tol)
+    assert quick_scale < 1.0 and full_scale <= quick_scale
+    assert full_scale >= quick_scale * envelope.RETRY_STEP ** 2   # the stroke's second-order terms: a step or two
+    played, _ = envelope.fit_envelope(quick, device, 0.15, tolerance=tol)
+    assert Envelope(device).check_motion(played).within(0.85)
+    small = big.scaled(0.05)
+    assert envelope.fit_envelope(small, device, 0.15, tolerance=tol, recheck=False) == (small, 1.0)
+
+
 def test_corrections_for_plants_within_the_tolerance_pass_the_checker():
     # Regression (the default demo, 0/3 parts reached): every planned motion left 15 % headroom, but
     # the checker reads a corrected table through the nominal plant, where the correction that

@@ -30,7 +30,8 @@ def test_remembered_solves_equal_a_fresh_solve_and_callers_cannot_change_them():
     plant = NominalPlant(CFG)
     f = np.array([30.0, 60.0])
     s = 2j * math.pi * f[:, None, None]
-    X = np.linalg.solve(s * np.eye(plant.A.shape[0]) - plant.A, np.broadcast_to(plant.B[:, :6], (2,) + (plant.A.shape[0], 6)))
+    nx = plant.A.shape[0]
+    X = np.linalg.solve(s * np.eye(nx) - plant.A, np.broadcast_to(plant.B[:, :6], (2, nx, 6)))
     Cy, Dy = plant.output_matrices("accel")
     first = plant.responses(f, ("accel", "voltage"))
     assert np.array_equal(first["accel"], Cy @ X + Dy[:, :6])

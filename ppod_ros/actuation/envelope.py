@@ -42,6 +42,7 @@ Example (a goal with 15 % headroom)::
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -337,24 +338,65 @@ class Envelope:
         of its harmonics)."""
         if not isinstance(motion, PlateMotion):
             raise ConfigError(f"motion: expected a PlateMotion, got {type(motion).__name__}")
-        active = motion.pruned()
-        f = motion.frequency_hz
-        values: dict[str, float] = {}
-        ratios: dict[str, float] = {}
-        worst: dict[str, int] = {}
-        self._frequencies(f, active.k, values, ratios)
-        acc, ang, margin = motion_extremes(active.phasors(), active.k, self.config.limits.working_radius_m)
-        self._motion_values(acc, ang, margin, values, ratios)
-        self._peak("limits.leg_stroke_m", self.exact_stroke(active), values, ratios, worst)
-        if currents is None:
-            top = int(active.k.max()) if active.num_harmonics else 0
-            currents = self.plant.feedforward(active, top) if top else np.zeros((1, 6), complex)
-        I = np.asarray(currents, dtype=complex)
-        k = np.arange(1, I.shape[0] + 1)
-        volts = self.plant.predict(f, I, "voltage") if np.any(I) else np.zeros_like(I)
-        self._actuators(I, table_peak(I, k), table_peak(volts, k), values, ratios, worst)
-        forbidden = tuple(kk for kk, _, _ in self.forbidden(f, active.k))
-        return EnvelopeReport(f, values, ratios, self._limits(), forbidden, worst)
+        return self._check_group([motion.pruned()], [currents])[0]
+
+    def check_motions(self, motions: Sequence[PlateMotion]) -> list[EnvelopeReport]:
+        """:meth:`check_motion` of each motion (its nominal feed-forward table), in order. Motions of
+        one frequency and one set of harmonics share the vectorised passes (plate peaks and margin,
+        current and voltage peaks: every channel of them is computed as for one motion alone); the
+        exact stroke is taken per motion."""
+        actives = []
+        for i, motion in enumerate(motions):
+            if not isinstance(motion, PlateMotion):
+                raise ConfigError(f"motions[{i}]: expected a PlateMotion, got {type(motion).__name__}")
+            actives.append(motion.pruned())
+        groups: dict[tuple, list[int]] = {}
+        for i, a in enumerate(actives):
+            groups.setdefault((float(a.frequency_hz), tuple(int(k) for k in a.k)), []).append(i)
+        out: list[EnvelopeReport | None] = [None] * len(actives)
+        for idx in groups.values():
+            for i, report in zip(idx, self._check_group([actives[i] for i in idx], [None] * len(idx))):
+                out[i] = report
+        return out  # type: ignore[return-value]
+
+    def _check_group(self, actives: list[PlateMotion], currents: list) -> list[EnvelopeReport]:
+        """The checks of :meth:`check_motion` for pruned motions of one frequency and one set of
+        harmonics (``currents``: per motion its table or None for the nominal feed-forward)."""
+        f = actives[0].frequency_hz
+        k_act = actives[0].k
+        S = len(actives)
+        freq_values: dict[str, float] = {}
+        freq_ratios: dict[str, float] = {}
+        self._frequencies(f, k_act, freq_values, freq_ratios)
+        ext = motion_extremes_many(np.stack([a.phasors() for a in actives]) if k_act.size
+                                   else np.zeros((S, 0, 6), complex), k_act, self.config.limits.working_radius_m)
+        tables = []
+        for a, I in zip(actives, currents):
+            if I is None:
+                top = int(a.k.max()) if a.num_harmonics else 0
+                I = self.plant.feedforward(a, top) if top else np.zeros((1, 6), complex)
+            tables.append(np.asarray(I, dtype=complex))
+        volts = [self.plant.predict(f, I, "voltage") if np.any(I) else np.zeros_like(I) for I in tables]
+        # Current and voltage peaks of every motion whose table has the same rows in one pass.
+        peaks: list = [None] * S
+        shapes: dict[int, list[int]] = {}
+        for i, I in enumerate(tables):
+            shapes.setdefault(I.shape[0], []).append(i)
+        for K, idx in shapes.items():
+            both = table_peak(np.concatenate([np.concatenate([tables[i], volts[i]], axis=1) for i in idx], axis=1),
+                              np.arange(1, K + 1)).reshape(len(idx), 2, 6)
+            for j, i in enumerate(idx):
+                peaks[i] = both[j]
+        forbidden = tuple(kk for kk, _, _ in self.forbidden(f, k_act))
+        reports = []
+        for i, a in enumerate(actives):
+            values, ratios = dict(freq_values), dict(freq_ratios)
+            worst: dict[str, int] = {}
+            self._motion_values(float(ext[i, 0]), float(ext[i, 1]), float(ext[i, 2]), values, ratios)
+            self._peak("limits.leg_stroke_m", self.exact_stroke(a), values, ratios, worst)
+            self._actuators(tables[i], peaks[i][0], peaks[i][1], values, ratios, worst)
+            reports.append(EnvelopeReport(f, values, ratios, self._limits(), forbidden, worst))
+        return reports
 
     def check_plate(self, frequency_hz: float, accel: np.ndarray) -> tuple[dict[str, float], dict[str, float]]:
         """(values, ratios) of the :data:`PLATE_LIMITS` of a plate motion given by its acceleration

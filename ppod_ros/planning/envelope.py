@@ -24,6 +24,7 @@ corrections a plant within it needs pass the checker.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -125,6 +126,8 @@ def corrected_motion_ratios(motion: PlateMotion, device, tolerance: PlantToleran
     T = _readings(device, tolerance, float(motion.frequency_hz), ks)
     read = np.einsum("skij,kj->ski", T, active.phasors())
     lim = device.limits
+    # One motion per call: the peak search refines every column at every column's candidates, so
+    # its cost grows with the square of the columns (12 plants x 3 already).
     ext = motion_extremes_many(read, np.asarray(ks), lim.working_radius_m)
     return {
         "limits.plate_accel_mps2": float(ext[:, 0].max() / lim.plate_accel_mps2),
@@ -135,48 +138,70 @@ def corrected_motion_ratios(motion: PlateMotion, device, tolerance: PlantToleran
 
 
 def fit_envelope(motion: PlateMotion, device, headroom: float = 0.15, step: float = RETRY_STEP,
-                 tolerance: PlantTolerance | None = None, *, recheck: bool = True) -> tuple[PlateMotion, float]:
+                 tolerance: PlantTolerance | None = None) -> tuple[PlateMotion, float]:
     """``motion`` scaled down until the device envelope holds with ``headroom`` under every limit
     (every ratio <= 1 - headroom) and, with ``tolerance``, the plate motion limits hold with the same
     headroom for the corrected tables of the plants within it; returns (motion, scale). LimitError
     naming the limit when no scale fits (a row at a forbidden frequency).
 
     The ratios are linear in amplitude but for the exact leg stroke's second-order terms, so the
-    scale they give is checked again on the scaled motion (and shrunk by ``step`` until it passes).
-    ``recheck=False`` returns that first scale unchecked: an estimate for ranking motions, never for
-    playing one (the planner fits the motion it sends with ``recheck=True``)."""
+    scale they give is checked again on the scaled motion (and shrunk by ``step`` until it passes);
+    a motion within as it is is returned at once (the checker's report is its own)."""
+    return fit_envelope_many([motion], device, headroom, step, tolerance)[0]
+
+
+def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 0.15, step: float = RETRY_STEP,
+                      tolerance: PlantTolerance | None = None) -> list[tuple[PlateMotion, float]]:
+    """:func:`fit_envelope` of each motion, in order, with the checker's vectorised passes shared
+    (:meth:`~ppod_ros.actuation.envelope.Envelope.check_motions`). LimitError for a motion that cannot
+    be fitted (none of the others is returned then)."""
     if not 0.0 <= headroom < 0.5:
         raise ConfigError(f"headroom: expected 0 <= headroom < 0.5 (fraction), got {headroom!r}")
-    if motion.is_zero():
-        return motion, 1.0
+    motions = list(motions)
+    out: list[tuple[PlateMotion, float] | None] = [(m, 1.0) if m.is_zero() else None for m in motions]
+    todo = [i for i, m in enumerate(motions) if out[i] is None]
+    if not todo:
+        return out  # type: ignore[return-value]
     envelope = _envelope(device)
     max_ratio = 1.0 - headroom
-    report = envelope.check_motion(motion)
-    name, worst = report.worst()
-    if not math.isfinite(worst):
-        raise report.error(max_ratio)  # a row at a forbidden frequency: no amplitude fits
+    reports = envelope.check_motions([motions[i] for i in todo])
+    for report in reports:
+        if not math.isfinite(report.worst()[1]):
+            raise report.error(max_ratio)  # a row at a forbidden frequency: no amplitude fits
     # The generator judges a corrected table's plate-side limits on the measured plate, and bounds
     # their nominal reading by 1 + limits.plant_model_allowance (actuation/corrections.py): keep the
     # reading under that bound with the same headroom.
     allowance = float(getattr(device.limits, "plant_model_allowance", 0.0))
-    robust = 0.0 if tolerance is None else (max(corrected_motion_ratios(motion, device, tolerance).values())
-                                            / (1.0 + allowance))
-    worst = max(worst, robust)
-    if worst <= max_ratio:
-        return motion, 1.0   # within as it is: the checker's report above is the candidate's own
-    scale = max_ratio / worst
-    if not recheck:
-        return motion.scaled(scale), scale
+    robust = ([0.0] * len(todo) if tolerance is None else
+              [max(corrected_motion_ratios(motions[i], device, tolerance).values()) / (1.0 + allowance)
+               for i in todo])
+    pending = []
+    for i, report, rob in zip(todo, reports, robust):
+        worst = max(report.worst()[1], rob)
+        if worst <= max_ratio:
+            out[i] = (motions[i], 1.0)   # within as it is: the checker's report above is its own
+        else:
+            pending.append((i, max_ratio / worst))
+    last = {}   # the last report of each motion still pending
     for _ in range(20):
-        candidate = motion.scaled(scale)
-        report = envelope.check_motion(candidate)
-        if report.within(max_ratio):
-            return candidate, scale
-        scale *= step
-    err = report.error(max_ratio)
+        if not pending:
+            return out  # type: ignore[return-value]
+        candidates = [motions[i].scaled(scale) for i, scale in pending]
+        still = []
+        for (i, scale), candidate, report in zip(pending, candidates, envelope.check_motions(candidates)):
+            if report.within(max_ratio):
+                out[i] = (candidate, scale)
+            else:
+                last[i] = report
+                still.append((i, scale * step))
+        pending = still
+    if not pending:
+        return out  # type: ignore[return-value]
+    i, scale = pending[0]
+    err = last[i].error(max_ratio)
     raise LimitError(f"motion: not within the device envelope with {100 * headroom:.0f} % headroom even at "
                      f"{100 * scale:.1f} % amplitude ({err})", limit=err.limit, limit_value=err.limit_value,
                      requested=err.requested)
 
 
-__all__ = ["PlantTolerance", "corrected_motion_ratios", "fit_envelope", "uncorrected_motions"]
+__all__ = ["PlantTolerance", "corrected_motion_ratios", "fit_envelope", "fit_envelope_many", "uncorrected_motions"]

@@ -50,7 +50,7 @@ from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.planning.design import _SCALE, DEFAULT_FREQUENCY_HZ, design_field, orient_phasors
-from ppod_ros.planning.envelope import PlantTolerance, fit_envelope, uncorrected_motions
+from ppod_ros.planning.envelope import PlantTolerance, fit_envelope, fit_envelope_many, uncorrected_motions
 from ppod_ros.planning.predict import budgeted, predict_velocities
 from ppod_ros.planning.specs import CENTRE_RADIUS_M, FieldSpec
 from ppod_ros.planning.task import TaskStep
@@ -857,7 +857,7 @@ class MultiTask:
             (s.plant_tolerance is not None and self.switches < s.unlearned_motions)
             or any(not self.state[g.index].estimated for g in self.goals))
         if order:
-            fitted = [self._fitted(pool[i]) for i in order]
+            fitted = self._fitted_many([pool[i] for i in order])
             fitted_costs, _ = self._costs(fitted, poses, statuses, budget=s.budget_fitted)
             if unlearned:
                 fitted_costs = fitted_costs + self._first_error_costs(fitted, poses, statuses)
@@ -960,15 +960,20 @@ class MultiTask:
         return gained > 0 and gained - had > g * gained
 
     def _fitted(self, motion: PlateMotion) -> PlateMotion:
-        """``motion`` fitted into the envelope with the planner's headroom and plant tolerance (cached:
-        the sink at a goal recurs every step)."""
-        hit = self._fits.get(motion.key)
-        if hit is None:
-            if len(self._fits) > 256:
+        return self._fitted_many([motion])[0]
+
+    def _fitted_many(self, motions: Sequence[PlateMotion]) -> list[PlateMotion]:
+        """``motions`` fitted into the envelope with the planner's headroom and plant tolerance (cached:
+        the sink at a goal recurs every step; the others fitted together)."""
+        s = self.settings
+        new = {m.key: m for m in motions if m.key not in self._fits}
+        if new:
+            if len(self._fits) + len(new) > 256:
                 self._fits.clear()
-            s = self.settings
-            hit = self._fits[motion.key] = fit_envelope(motion, self.device, s.headroom, tolerance=s.plant_tolerance)[0]
-        return hit
+            for key, (fitted, _) in zip(new, fit_envelope_many(list(new.values()), self.device, s.headroom,
+                                                               tolerance=s.plant_tolerance)):
+                self._fits[key] = fitted
+        return [self._fits[m.key] for m in motions]
 
     def _update_focus(self, t_s: float, statuses: list[PartStatus]) -> None:
         s = self.settings
@@ -1280,10 +1285,7 @@ class MultiTask:
                 if 0 < norm_t < floor:
                     vt = vt * (floor / norm_t)
                 trials.append(_to_motion(vt, freq, harmonics, name="mpc"))
-            # Ranked at the scale the checker's ratios give (no second check of each scaled trial):
-            # the motion chosen is fitted and checked in full before it is played (_plan).
-            trials = [fit_envelope(m, self.device, s.headroom, tolerance=s.plant_tolerance, recheck=False)[0]
-                      for m in trials]
+            trials = [m for m, _ in fit_envelope_many(trials, self.device, s.headroom, tolerance=s.plant_tolerance)]
             costs, _ = self._costs(trials, poses, statuses, budget=True)
             j = int(np.argmin(costs))
             if not costs[j] < best_cost:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from ppod_ros.device import default_device_config
-from ppod_ros.errors import ConfigError
+from ppod_ros.errors import ConfigError, LimitError
 from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, RigidPart, published_rigid_part
 from ppod_ros.planning import envelope, predict
@@ -211,23 +211,22 @@ def test_envelope_keeps_headroom_under_every_limit():
         envelope.fit_envelope(small, device, 0.7)
 
 
-def test_an_unchecked_fit_ranks_at_the_checkers_first_scale_and_the_full_fit_then_passes():
-    # recheck=False (the planner's line-search trials) gives the scale the checker's ratios give at full
-    # amplitude without checking the scaled motion again; the full fit of that motion, which the planner
-    # applies to the motion it plays, is within the headroom by the checker itself.
-    from ppod_ros.actuation.envelope import Envelope
-
+def test_motions_fitted_together_are_fitted_as_each_alone():
+    # fit_envelope_many (the planner's line-search trials and ranked candidates) gives fit_envelope's
+    # motion and scale for each motion, in order: one within as it is untouched, the others scaled.
     device = default_device_config()
-    big = PlateMotion.single(30.0, [30.0, 0, 10.0, 0, 200.0, 0], [0, 0, math.pi / 2, 0, -math.pi / 2, 0])
     tol = envelope.PlantTolerance()
-    quick, quick_scale = envelope.fit_envelope(big, device, 0.15, tolerance=tol, recheck=False)
-    full, full_scale = envelope.fit_envelope(big, device, 0.15, tolerance=tol)
-    assert quick_scale < 1.0 and full_scale <= quick_scale
-    assert full_scale >= quick_scale * envelope.RETRY_STEP ** 2   # the stroke's second-order terms: a step or two
-    played, _ = envelope.fit_envelope(quick, device, 0.15, tolerance=tol)
-    assert Envelope(device).check_motion(played).within(0.85)
-    small = big.scaled(0.05)
-    assert envelope.fit_envelope(small, device, 0.15, tolerance=tol, recheck=False) == (small, 1.0)
+    big = PlateMotion.single(30.0, [30.0, 0, 10.0, 0, 200.0, 0], [0, 0, math.pi / 2, 0, -math.pi / 2, 0])
+    sink = PlateMotion.single(30.0, [16.0, 19.0, 1.2, 33.0, 28.0, 107.0], [0.1, 1.5, 1.0, 2.9, -0.4, 1.6])
+    motions = [big, big.scaled(0.05), PlateMotion.zero(30.0), big.scaled(0.6), sink.scaled(3.0)]
+    many = envelope.fit_envelope_many(motions, device, 0.15, tolerance=tol)
+    for motion, (fitted, scale) in zip(motions, many):
+        alone, alone_scale = envelope.fit_envelope(motion, device, 0.15, tolerance=tol)
+        assert fitted.key == alone.key and scale == alone_scale
+    assert many[1] == (motions[1], 1.0) and many[2][1] == 1.0 and many[0][1] < 1.0
+    forbidden = PlateMotion.single(500.0, [1, 0, 0, 0, 0, 0], [0] * 6)
+    with pytest.raises(LimitError):
+        envelope.fit_envelope_many([motions[1], forbidden], device, 0.15)
 
 
 def test_corrections_for_plants_within_the_tolerance_pass_the_checker():

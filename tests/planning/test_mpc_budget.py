@@ -144,18 +144,18 @@ def test_the_fitted_candidates_are_budgeted_only_when_asked():
         task = MultiTask([part], [PartGoal(0, 0.02, -0.02, 0.0)], timeout_s=30.0,
                          settings=MpcSettings(budget_fitted=on))
         fitted, costs = [], []
-        real_fitted, real_costs = task._fitted, task._costs
+        real_fitted, real_costs = task._fitted_many, task._costs
 
-        def spy_fitted(motion, _out=fitted, _real=real_fitted):
-            out = _real(motion)
-            _out.append(out.key)
+        def spy_fitted(motions, _out=fitted, _real=real_fitted):
+            out = _real(motions)
+            _out.extend(m.key for m in out)
             return out
 
         def spy_costs(motions, poses, statuses, budget=False, _out=costs, _real=real_costs):
             _out.append(([m.key for m in motions], budget))
             return _real(motions, poses, statuses, budget)
 
-        task._fitted, task._costs = spy_fitted, spy_costs
+        task._fitted_many, task._costs = spy_fitted, spy_costs
         task.step(0.0, [[0.04, 0.03, 1.2]])
         ranked = [budget for keys, budget in costs if len(keys) > 1 and set(keys) <= set(fitted)]
         assert ranked == [on]

@@ -185,7 +185,7 @@ class MpcSettings:
                                           # carried a bracket stopped 0.86 mm from its goal back to 1.2 mm), the
                                           # next motion may start this long after the stop (the ramp's end)
                                           # instead of min_dwell_s (None: min_dwell_s)
-    pivot_from_rad: float = 0.0           # a rigid part this far from its goal angle (and the pivot within
+    pivot_from_rad: float = 0.6           # a rigid part this far from its goal angle (and the pivot within
                                           # region_radius_m of the centre) is turned about the pivot: the fixed
                                           # point of the rigid motion from its pose to its goal pose. Its waypoint
                                           # is its pose turned about the pivot (the turn and the translation at
@@ -194,7 +194,14 @@ class MpcSettings:
                                           # point 10 mm from the bracket turns it at 0.99 of the spin in place
                                           # and carries it at 4.7 mm/s along the circle (a rigid turn about that
                                           # point); the slow scenes carried the bracket home first (3 s, no
-                                          # turn) and then turned it 115-170 deg at 10-16 deg/s. 0: off
+                                          # turn) and then turned it 115-170 deg at 10-16 deg/s. One bracket,
+                                          # benchmark scenes 0-39: 40/40 both, median 7.5 -> 7.3 s, 90th
+                                          # percentile 12.8 -> 12.6 s, over 15 s 2 -> 1 (docs/planner.md). 0: off
+    pivot_min_scale: float = 0.75         # ... once the part's (translation) velocity scale is estimated and while
+                                          # it is at least this: a bracket of high friction (0.36-0.44: scale
+                                          # 0.5-0.73 after 1 s, 0.77-0.96 at 0.22-0.30) turned about its pivot
+                                          # at 0.2 of the model, 5 deg/s (ungated, 1 rad: scene 16 16.2 -> 28.9 s,
+                                          # 7 of 40 over 15 s); gated from the start (unestimated scale 1): 4 of 40
     hold_gave_up_m: float = 0.005         # the motion playing, when the solver gives up on it ("not converged"
     hold_gave_up_rad: float = 0.17        # under PLANNER_SOLVER's caps, not contact lost) at a pose within this
                                           # distance and angle (10 deg) of every commanded part's pose where it
@@ -1134,14 +1141,17 @@ class MultiTask:
 
     def _pivot(self, goal: PartGoal, pose: np.ndarray) -> np.ndarray | None:
         """The pivot (x, y) a rigid part at ``pose`` is turned about (``MpcSettings.pivot_from_rad``):
-        None when off, for a point part or no goal angle, nearer its goal angle than that, or a pivot
-        beyond ``region_radius_m`` of the centre."""
+        None when off, for a point part or no goal angle, nearer its goal angle than that, a velocity
+        scale not estimated yet or under ``pivot_min_scale``, or a pivot beyond ``region_radius_m`` of
+        the centre."""
         s = self.settings
         if not (s.pivot_from_rad > 0 and goal.theta_rad is not None
                 and isinstance(self.parts[goal.index], RigidPart) and np.all(np.isfinite(pose))):
             return None
         a = -float(_wrap(pose[2] - goal.theta_rad, self.symmetry[goal.index]))
-        if abs(a) < s.pivot_from_rad:
+        st = self.state[goal.index]
+        slow = s.pivot_min_scale > 0 and not (st.estimated and st.scale >= s.pivot_min_scale)
+        if abs(a) < s.pivot_from_rad or slow:   # slow: high friction (or not known yet) turns badly off the part
             return None
         c = pivot_point(pose, goal, a)
         return c if c is not None and float(np.hypot(*c)) <= s.region_radius_m else None

@@ -35,10 +35,16 @@ def test_the_pivot_turns_the_pose_onto_the_goal_pose(turn):
     assert pivot_point(pose, goal, 0.0) is None
 
 
+def _known(task: MultiTask, scale: float = 1.0) -> MultiTask:
+    """The part's velocity scale as estimated from a motion that moved it."""
+    task.state[0].estimated, task.state[0].scale = True, scale
+    return task
+
+
 def test_the_waypoint_lies_on_the_circle_about_the_pivot_and_the_angle_weighs_in_full():
     part = published_rigid_part()
-    on = MultiTask([part], [GOAL], settings=MpcSettings(pivot_from_rad=1.0))
-    off = MultiTask([part], [GOAL])
+    on = _known(MultiTask([part], [GOAL]))
+    off = _known(MultiTask([part], [GOAL], settings=MpcSettings(pivot_from_rad=0.0)))
     st = on._statuses(0.0, START)
     a = -float((START[0, 2] - GOAL.theta_rad + math.pi) % (2 * math.pi) - math.pi)
     c = on._pivot(GOAL, START[0])
@@ -51,15 +57,19 @@ def test_the_waypoint_lies_on_the_circle_about_the_pivot_and_the_angle_weighs_in
     assert off._angle_weights(st, START)[0] == pytest.approx(0.03 * 0.01 / st[0].position_error_m)
     # Near its goal angle (within pivot_from_rad) the part is not pivoted.
     near = START.copy()
-    near[0, 2] = GOAL.theta_rad - 0.9
+    near[0, 2] = GOAL.theta_rad - 0.5
     assert on._pivot(GOAL, near[0]) is None
+    # Nor before its velocity scale is estimated, nor while the scale says high friction.
+    assert MultiTask([part], [GOAL])._pivot(GOAL, START[0]) is None
+    assert _known(MultiTask([part], [GOAL]), 0.6)._pivot(GOAL, START[0]) is None
+    assert _known(MultiTask([part], [GOAL]), 0.8)._pivot(GOAL, START[0]) is not None
 
 
-def test_the_first_motion_turns_the_bracket_on_its_way_home():
+def test_the_bracket_is_turned_on_its_way_home():
     part = published_rigid_part()
     planned = {}
-    for name, settings in (("on", MpcSettings(pivot_from_rad=1.0)), ("off", MpcSettings())):
-        task = MultiTask([part], [GOAL], settings=settings, timeout_s=30.0)
+    for name, settings in (("on", MpcSettings()), ("off", MpcSettings(pivot_from_rad=0.0))):
+        task = _known(MultiTask([part], [GOAL], settings=settings, timeout_s=30.0))
         task.step(0.0, START)
         v = task.last_prediction["velocity"][0]       # predicted, scaled: m/s and rad/s
         d0 = math.hypot(GOAL.x_m - START[0, 0], GOAL.y_m - START[0, 1])
@@ -74,3 +84,35 @@ def test_the_first_motion_turns_the_bracket_on_its_way_home():
     assert abs(turn_off) < 15.0 and closer_off > 10.0, planned
     assert math.copysign(1.0, turn_on) == math.copysign(1.0, a) and abs(turn_on) > 15.0, planned
     assert closer_on > 1.0, planned
+
+
+def _scene16(settings: MpcSettings):
+    """Benchmark scene 16 of one bracket as `ppod bench planner --sections multipart` runs it: the
+    scene's bracket at friction 0.441 (the model says 0.3), the stack's plant error and tracker."""
+    import dataclasses
+
+    from ppod_ros.planning.simulate import ActuatorPlantError, run_on_dynamics
+    from ppod_sim.ros_node import default_scene_path
+    from ppod_sim.scene import load_scene
+
+    bracket = next(p for p in load_scene(default_scene_path()).parts if p.label == "bracket").part
+    true = dataclasses.replace(bracket, mu=np.full(len(bracket.mu), 0.4411153350400894), mu_static=None)
+    goal = PartGoal(0, 0.024006020226564527, 0.0036305576587046706, 0.9155943430264353, 1e-3, math.radians(2))
+    task = MultiTask([published_rigid_part()], [goal], settings=settings, timeout_s=30.0)
+    start = [[0.0037938314183616866, -0.010054834568226624, -2.7296472176220012]]
+    plant = ActuatorPlantError.random(np.random.default_rng(1023881567))
+    run = run_on_dynamics(task, [true], start, horizon_s=31.0, ramp_s=0.5, latency_s=0.1, plant=plant,
+                          seed=1023881567 % 1000, keep_steps=True)
+    return run
+
+
+def test_the_slowest_one_bracket_benchmark_scene_is_brought_in_within_15_s():
+    # Without the pivot: carried home in 3 s, then turned 130 deg at 10-13 deg/s; time to goal 16.5 s
+    # of device time here (16.2 s in the benchmark run; target 15 s). With it, turned about its pivot
+    # whenever its velocity scale is at least 0.75: 14.1 s (the same in the benchmark run).
+    times = {}
+    for name, settings in (("on", MpcSettings()), ("off", MpcSettings(pivot_from_rad=0.0))):
+        run = _scene16(settings)
+        assert run.step.done, run.step.text
+        times[name] = run.step.parts[0].time_to_goal_s
+    assert times["on"] <= 15.0 < times["off"], times

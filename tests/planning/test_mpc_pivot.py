@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from ppod_ros.parts import published_rigid_part
-from ppod_ros.planning.mpc import MpcSettings, MultiTask, PartGoal, pivot_point
+from ppod_ros.planning import predict
+from ppod_ros.planning.mpc import MpcSettings, MultiTask, PartGoal, pivot_point, template_motion
 
 # Benchmark scene 16 of one bracket (seed 0): 24 mm from its goal, 151 deg off (the slowest scene: the
 # bracket was carried home in 3 s without turning, then turned for 11 s at 10-13 deg/s).
@@ -63,6 +64,11 @@ def test_the_waypoint_lies_on_the_circle_about_the_pivot_and_the_angle_weighs_in
     assert MultiTask([part], [GOAL])._pivot(GOAL, START[0]) is None
     assert _known(MultiTask([part], [GOAL]), 0.6)._pivot(GOAL, START[0]) is None
     assert _known(MultiTask([part], [GOAL]), 0.8)._pivot(GOAL, START[0]) is not None
+    # The template: the spin moved to the pivot, both ways (turning the bracket opposite ways).
+    assert template_motion("pivot", MultiTask([part], [GOAL]), GOAL, START[0]) == []
+    ms = template_motion("pivot", on, GOAL, START[0])
+    v, ok = predict.predict_velocities(ms, part, START)
+    assert len(ms) == 2 and ok.all() and v[0, 0, 2] * v[1, 0, 2] < 0
 
 
 def test_the_bracket_is_turned_on_its_way_home():

@@ -191,7 +191,7 @@ class MpcSettings:
                                           # is its pose turned about the pivot (the turn and the translation at
                                           # once), its angle weighed in full at any distance, and the spin moved
                                           # to the pivot is a template ("pivot"). In the model the spin about a
-                                          # point 10 mm from the bracket turns it at 0.99 of the spin in place
+                                          # point 10 mm from the bracket turns it at 0.9-1.0 of the spin in place
                                           # and carries it at 4.7 mm/s along the circle (a rigid turn about that
                                           # point); the slow scenes carried the bracket home first (3 s, no
                                           # turn) and then turned it 115-170 deg at 10-16 deg/s. One bracket,

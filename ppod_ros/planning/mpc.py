@@ -185,6 +185,23 @@ class MpcSettings:
                                           # carried a bracket stopped 0.86 mm from its goal back to 1.2 mm), the
                                           # next motion may start this long after the stop (the ramp's end)
                                           # instead of min_dwell_s (None: min_dwell_s)
+    pivot_from_rad: float = 0.6           # a rigid part this far from its goal angle (and the pivot within
+                                          # region_radius_m of the centre) is turned about the pivot: the fixed
+                                          # point of the rigid motion from its pose to its goal pose. Its waypoint
+                                          # is its pose turned about the pivot (the turn and the translation at
+                                          # once), its angle weighed in full at any distance, and the spin moved
+                                          # to the pivot is a template ("pivot"). In the model the spin about a
+                                          # point 10 mm from the bracket turns it at 0.9-1.0 of the spin in place
+                                          # and carries it at 4.7 mm/s along the circle (a rigid turn about that
+                                          # point); the slow scenes carried the bracket home first (3 s, no
+                                          # turn) and then turned it 115-170 deg at 10-16 deg/s. One bracket,
+                                          # benchmark scenes 0-39: 40/40 both, median 7.5 -> 7.3 s, 90th
+                                          # percentile 12.8 -> 12.6 s, over 15 s 2 -> 1 (docs/planner.md). 0: off
+    pivot_min_scale: float = 0.75         # ... once the part's (translation) velocity scale is estimated and while
+                                          # it is at least this: a bracket of high friction (0.36-0.44: scale
+                                          # 0.5-0.73 after 1 s, 0.77-0.96 at 0.22-0.30) turned about its pivot
+                                          # at 0.2 of the model, 5 deg/s (ungated, 1 rad: scene 16 16.2 -> 28.9 s,
+                                          # 7 of 40 over 15 s); gated from the start (unestimated scale 1): 4 of 40
     hold_gave_up_m: float = 0.005         # the motion playing, when the solver gives up on it ("not converged"
     hold_gave_up_rad: float = 0.17        # under PLANNER_SOLVER's caps, not contact lost) at a pose within this
                                           # distance and angle (10 deg) of every commanded part's pose where it
@@ -415,6 +432,29 @@ def _template_spin(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list
                   name=f"spin{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
 
 
+def pivot_point(pose: np.ndarray, goal: PartGoal, angle_rad: float) -> np.ndarray | None:
+    """The fixed point (x, y) of the rigid motion that turns ``pose`` by ``angle_rad`` (the goal angle's
+    error, the way to turn) and takes its position to the goal's: turned about it by that angle, the
+    part arrives at its goal pose. None for no turn."""
+    if abs(angle_rad) < 1e-9:
+        return None
+    p, q = np.asarray(pose[:2], float), np.array([goal.x_m, goal.y_m])
+    e = q - p
+    n = np.array([-e[1], e[0]])        # the chord turned +90 deg (length d): the centre lies on its side
+    return 0.5 * (p + q) + n * (0.5 / math.tan(0.5 * angle_rad))
+
+
+def _template_pivot(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
+    """A rigid part turned about its pivot (MpcSettings.pivot_from_rad), both ways: the spin moved to
+    the pivot, where the part turns as in place and is carried along the circle about it."""
+    c = planner._pivot(goal, pose)
+    if c is None:
+        return []
+    base = planner._fitted(spin_motion(planner.settings))
+    return [moved(base, float(c[0]), float(c[1]), mirror=reverse,
+                  name=f"pivot{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
+
+
 def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
     if goal.theta_rad is None:
         return []
@@ -430,12 +470,14 @@ STRONG_TEMPLATES = frozenset({"transport"})
 
 TEMPLATES: dict[str, Callable] = {"sink": _template_sink, "transport": _template_transport,
                                   "line": _template_line, "rotation": _template_rotation,
-                                  "orient": _template_orient, "spin": _template_spin}
+                                  "orient": _template_orient, "spin": _template_spin,
+                                  "pivot": _template_pivot}
 
 
 # The centre design each template kind is moved from (None: built directly).
 TEMPLATE_BASES: dict[str, str | None] = {"sink": "sink", "transport": "transport", "line": "line_sink",
-                                         "rotation": "rotation", "orient": None, "spin": None}
+                                         "rotation": "rotation", "orient": None, "spin": None,
+                                         "pivot": None}
 
 
 def base_kinds(settings: MpcSettings | None = None) -> list[str]:
@@ -828,7 +870,7 @@ class MultiTask:
         current_cost, current_vel = self._costs([self.current], poses, statuses)
         candidates = [PlateMotion.zero(s.frequency_hz, name="rest")]
         for g, st in zip(self.goals, statuses):
-            for kind in s.templates:
+            for kind in s.templates + (("pivot",) if s.pivot_from_rad > 0 and "pivot" not in s.templates else ()):
                 if kind in STRONG_TEMPLATES and self._close(st):
                     continue
                 candidates += template_motion(kind, self, g, poses[g.index])
@@ -1102,6 +1144,23 @@ class MultiTask:
                                 "ramp_s": self.settings.ramp_s}
         return motion if changed else None
 
+    def _pivot(self, goal: PartGoal, pose: np.ndarray) -> np.ndarray | None:
+        """The pivot (x, y) a rigid part at ``pose`` is turned about (``MpcSettings.pivot_from_rad``):
+        None when off, for a point part or no goal angle, nearer its goal angle than that, a velocity
+        scale not estimated yet or under ``pivot_min_scale``, or a pivot beyond ``region_radius_m`` of
+        the centre."""
+        s = self.settings
+        if not (s.pivot_from_rad > 0 and goal.theta_rad is not None
+                and isinstance(self.parts[goal.index], RigidPart) and np.all(np.isfinite(pose))):
+            return None
+        a = -float(_wrap(pose[2] - goal.theta_rad, self.symmetry[goal.index]))
+        st = self.state[goal.index]
+        slow = s.pivot_min_scale > 0 and not (st.estimated and st.scale >= s.pivot_min_scale)
+        if abs(a) < s.pivot_from_rad or slow:   # slow: high friction (or not known yet) turns badly off the part
+            return None
+        c = pivot_point(pose, goal, a)
+        return c if c is not None and float(np.hypot(*c)) <= s.region_radius_m else None
+
     def _waypoints(self, poses: np.ndarray, statuses: list[PartStatus]) -> tuple[np.ndarray, np.ndarray]:
         """Per goal: the target configuration after the horizon (G, 3) and the weights (G,)."""
         s, H = self.settings, self.settings.horizon_s
@@ -1116,7 +1175,13 @@ class MultiTask:
             if g.theta_rad is not None:
                 a = -float(_wrap(p[2] - g.theta_rad, self.symmetry[g.index]))
                 lim = min(s.max_turn_radps * H, s.approach_per_s * H * abs(a))
-                way[k, 2] = p[2] + float(np.clip(a, -lim, lim))
+                turn = float(np.clip(a, -lim, lim))
+                way[k, 2] = p[2] + turn
+                c = self._pivot(g, p)
+                if c is not None:   # turned about the pivot: the turn and the way home at once
+                    co, si = math.cos(turn), math.sin(turn)
+                    r = p[:2] - c
+                    way[k, :2] = c + np.array([co * r[0] - si * r[1], si * r[0] + co * r[1]])
             else:
                 way[k, 2] = p[2]
             tr = self.state[g.index]
@@ -1137,12 +1202,18 @@ class MultiTask:
                 weight[k] = s.hold_weight
         return way, weight
 
-    def _angle_weights(self, statuses: list[PartStatus]) -> np.ndarray:
+    def _angle_weights(self, statuses: list[PartStatus], poses: np.ndarray | None = None) -> np.ndarray:
         """Per goal, the weight of an angle error (m/rad): full within ``angle_from_m`` of the goal,
-        falling as angle_from_m / distance beyond it."""
+        falling as angle_from_m / distance beyond it; full for a part turned about its pivot (``poses``
+        given; ``MpcSettings.pivot_from_rad``)."""
         s = self.settings
         d = np.array([st.position_error_m if math.isfinite(st.position_error_m) else 0.0 for st in statuses])
-        return s.angle_weight_m_per_rad * np.minimum(1.0, s.angle_from_m / np.maximum(d, 1e-9))
+        w = s.angle_weight_m_per_rad * np.minimum(1.0, s.angle_from_m / np.maximum(d, 1e-9))
+        if poses is not None and s.pivot_from_rad > 0:
+            for k, g in enumerate(self.goals):
+                if self._pivot(g, poses[g.index]) is not None:
+                    w[k] = s.angle_weight_m_per_rad
+        return w
 
     def _costs(self, motions: Sequence[PlateMotion], poses: np.ndarray, statuses: list[PartStatus],
                budget: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -1179,7 +1250,8 @@ class MultiTask:
         pred = cur[None] + scales * (v_cur[None] * (0.5 * r) + vel * (H - 0.5 * r))  # (M, G, 3)
         res_xy = (pred[..., :2] - way[None, :, :2]) * weight[None, :, None]
         oriented = np.array([g.theta_rad is not None for g in self.goals], float)
-        res_th = (pred[..., 2] - way[None, :, 2]) * self._angle_weights(statuses)[None] * oriented[None] * weight[None]
+        res_th = ((pred[..., 2] - way[None, :, 2]) * self._angle_weights(statuses, poses)[None] * oriented[None]
+                  * weight[None])
         parts = [res_xy.reshape(M, -1), res_th]
         # Collisions between predicted positions (commanded parts, and the others if asked).
         idx = [g.index for g in self.goals]

@@ -121,6 +121,8 @@ def test_template_table_dispatches_and_unknown_kind_raises():
     task = MultiTask([published_rigid_part()], [PartGoal(0, 0.01, 0.0, 0.5)])
     pose = np.array([0.03, 0.01, 1.0])
     for kind in TEMPLATES:
+        if kind == "pivot":   # only far from the goal angle, the scale estimated (tests/planning/test_mpc_pivot.py)
+            continue
         ms = template_motion(kind, task, task.goals[0], pose)
         assert ms and all(isinstance(m, PlateMotion) and not m.is_zero() for m in ms)
     with pytest.raises(ConfigError, match="unknown template field 'spiral'"):

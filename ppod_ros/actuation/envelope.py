@@ -343,8 +343,8 @@ class Envelope:
     def check_motions(self, motions: Sequence[PlateMotion]) -> list[EnvelopeReport]:
         """:meth:`check_motion` of each motion (its nominal feed-forward table), in order. Motions of
         one frequency and one set of harmonics share the vectorised passes (plate peaks and margin,
-        current and voltage peaks: every channel of them is computed as for one motion alone); the
-        exact stroke is taken per motion."""
+        current and voltage peaks, each channel's as for its motion alone: bit for bit with one
+        harmonic, to the last bit of a wider table's sums with more); the exact stroke is per motion."""
         actives = []
         for i, motion in enumerate(motions):
             if not isinstance(motion, PlateMotion):

@@ -1008,14 +1008,15 @@ class MultiTask:
         """``motions`` fitted into the envelope with the planner's headroom and plant tolerance (cached:
         the sink at a goal recurs every step; the others fitted together)."""
         s = self.settings
-        new = {m.key: m for m in motions if m.key not in self._fits}
+        out = {m.key: self._fits.get(m.key) for m in motions}   # the hits taken before the cache may be cleared
+        new = {m.key: m for m in motions if out[m.key] is None}
         if new:
             if len(self._fits) + len(new) > 256:
                 self._fits.clear()
             for key, (fitted, _) in zip(new, fit_envelope_many(list(new.values()), self.device, s.headroom,
                                                                tolerance=s.plant_tolerance)):
-                self._fits[key] = fitted
-        return [self._fits[m.key] for m in motions]
+                self._fits[key] = out[key] = fitted
+        return [out[m.key] for m in motions]
 
     def _update_focus(self, t_s: float, statuses: list[PartStatus]) -> None:
         s = self.settings

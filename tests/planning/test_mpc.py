@@ -231,6 +231,22 @@ def test_motions_fitted_together_are_fitted_as_each_alone():
         envelope.fit_envelope_many([motions[1], forbidden], device, 0.15)
 
 
+def test_fits_asked_together_survive_the_fit_cache_clearing_itself():
+    # Regression (a benchmark run died with a KeyError): when a step's ranked candidates mix a cached fit
+    # with new ones and the cache is full, it is cleared before the new fits go in; the cached one must
+    # still be returned.
+    task = MultiTask([PointPart(0.3)], [PartGoal(0, 0.02, 0.0)])
+    sink = PlateMotion.single(30.0, [16.0, 19.0, 1.2, 33.0, 28.0, 107.0], [0.1, 1.5, 1.0, 2.9, -0.4, 1.6])
+    cached = task._fitted(sink)
+    for j in range(256):   # fill the cache to its bound
+        task._fits[bytes([j % 256, j // 256, 1])] = cached
+    other = sink.scaled(0.5)
+    got = task._fitted_many([sink, other])
+    assert got[0] is cached and got[1].key == envelope.fit_envelope(other, task.device, 0.15,
+                                                                     tolerance=envelope.PlantTolerance())[0].key
+    assert len(task._fits) <= 257
+
+
 def test_corrections_for_plants_within_the_tolerance_pass_the_checker():
     # Regression (the default demo, 0/3 parts reached): every planned motion left 15 % headroom, but
     # the checker reads a corrected table through the nominal plant, where the correction that

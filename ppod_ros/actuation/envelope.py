@@ -377,16 +377,10 @@ class Envelope:
                 I = self.plant.feedforward(a, top) if top else np.zeros((1, 6), complex)
             tables.append(np.asarray(I, dtype=complex))
         volts = [self.plant.predict(f, I, "voltage") if np.any(I) else np.zeros_like(I) for I in tables]
-        # Current and voltage peaks of every motion whose table has the same rows in one pass.
-        peaks: list = [None] * S
-        shapes: dict[int, list[int]] = {}
-        for i, I in enumerate(tables):
-            shapes.setdefault(I.shape[0], []).append(i)
-        for K, idx in shapes.items():
-            both = table_peak(np.concatenate([np.concatenate([tables[i], volts[i]], axis=1) for i in idx], axis=1),
-                              np.arange(1, K + 1)).reshape(len(idx), 2, 6)
-            for j, i in enumerate(idx):
-                peaks[i] = both[j]
+        # Current and voltage peaks of every motion in one pass (one set of harmonics: the feed-forward
+        # tables have the same rows; a table given to check_motion is a group of its own).
+        peaks = table_peak(np.concatenate([np.concatenate([I, V], axis=1) for I, V in zip(tables, volts)], axis=1),
+                           np.arange(1, tables[0].shape[0] + 1)).reshape(S, 2, 6)
         forbidden = tuple(kk for kk, _, _ in self.forbidden(f, k_act))
         reports = []
         for i, a in enumerate(actives):

@@ -117,10 +117,11 @@ class MpcSettings:
     settle_s: float = 0.5                 # within tolerance for this long: reached
     lost_after_s: float = 6.0             # a commanded part unseen this long: failed (touching parts
                                           # are lost by the tracker for a while)
-    templates: tuple[str, ...] = ("sink", "rotation", "orient", "spin", "transport")  # TEMPLATES tried per
-                                          # goal (with "line" too, and without the spin, 2 of 8 benchmark
-                                          # scenes of 3 parts against 5 of 8: the 1 s horizon takes its fast
-                                          # gains for one part at the others' cost)
+    templates: tuple[str, ...] = ("sink", "rotation", "orient", "spin", "transport", "pivot")  # TEMPLATES
+                                          # tried per goal (with "line" too, and without the spin, 2 of 8
+                                          # benchmark scenes of 3 parts against 5 of 8: the 1 s horizon takes its
+                                          # fast gains for one part at the others' cost); "pivot" offers
+                                          # candidates only while a part is pivoted (pivot_from_rad)
     pair_lines: bool = False              # the line sink through every two goals whose parts are near them
                                           # (4 of 8 against 5 of 8)
     unlearned_motions: int = 0            # the accelerometer feedback plays a session's first motions with
@@ -870,7 +871,7 @@ class MultiTask:
         current_cost, current_vel = self._costs([self.current], poses, statuses)
         candidates = [PlateMotion.zero(s.frequency_hz, name="rest")]
         for g, st in zip(self.goals, statuses):
-            for kind in s.templates + (("pivot",) if s.pivot_from_rad > 0 and "pivot" not in s.templates else ()):
+            for kind in s.templates:
                 if kind in STRONG_TEMPLATES and self._close(st):
                     continue
                 candidates += template_motion(kind, self, g, poses[g.index])

@@ -13,7 +13,8 @@ are referenced to the cycle start (t = 0 at the first sample of each cycle).
 State machine (DeviceState): DISABLED -ENABLE-> ENABLED (RAMPING while a ramp runs); DISABLE ramps to
 zero then DISABLED; no heartbeat for ``watchdog_timeout_s`` -> WATCHDOG (ramp to zero within
 ``watchdog_ramp_s``; ENABLE resumes); ESTOP from any state -> ramp to zero within ``estop_ramp_s``,
-latched until RESET_ESTOP; a stopping fault (thermal, voltage, stroke, over-current) -> FAULT,
+latched until RESET_ESTOP (to FAULT instead of DISABLED when a stopping fault was raised meanwhile); a
+stopping fault (thermal, voltage, stroke, over-current) -> FAULT,
 ramped to zero, until CLEAR_FAULTS. After any stop the active table is zero.
 """
 
@@ -155,6 +156,10 @@ class SimDevice:
         self._sq_time = 0.0
         self.coil_rms_a = np.zeros(6)
         self.truth: deque[CycleTruth] = deque(maxlen=256)
+        #: Every stopping fault as it is raised (not while it stays latched): (device time, flag, the
+        #: state it met), the first 256 kept; ``stopping_fault_count`` counts them all.
+        self.stopping_faults: list[tuple[float, Fault, DeviceState]] = []
+        self.stopping_fault_count = 0
         self.cycle_callbacks: list[Callable[[CycleTruth], None]] = []
         self._start_cycle()
 
@@ -260,7 +265,8 @@ class SimDevice:
                 self.player.stop(max(rec.ramp_s, t.min_ramp_s), now)
         elif rec.command == Command.RESET_ESTOP:
             if self.state == DeviceState.ESTOP:
-                self.state = DeviceState.DISABLED
+                # A stopping fault raised during the stop stays latched: FAULT until CLEAR_FAULTS.
+                self.state = DeviceState.FAULT if self.faults & STOPPING_FAULTS else DeviceState.DISABLED
                 self.faults &= ~Fault.ESTOP
         elif rec.command == Command.SUMMARY_HARMONICS:
             self.telemetry.requested_harmonics = rec.harmonics
@@ -305,6 +311,10 @@ class SimDevice:
         """Latch a fault; a stopping one ramps to zero from ``at_s`` (default now): the end of the
         period in which it was detected, where what was played so far ends (no step on the coils)."""
         at_s = self.time_s if at_s is None else at_s
+        if flag & STOPPING_FAULTS and not flag & self.faults:
+            self.stopping_fault_count += 1
+            if len(self.stopping_faults) < 256:
+                self.stopping_faults.append((at_s, Fault(flag), self.state))
         self.faults |= flag
         if self.state in (
             DeviceState.ENABLED,

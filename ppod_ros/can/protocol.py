@@ -88,7 +88,7 @@ class DeviceState(IntEnum):
 class Command(IntEnum):
     ENABLE = 1
     DISABLE = 2  # ramp to zero (payload ramp, at least the device minimum), then disabled
-    RESET_ESTOP = 3  # leave the latched emergency stop (-> disabled)
+    RESET_ESTOP = 3  # leave the latched emergency stop (-> disabled; -> fault if a stopping fault latched)
     CLEAR_FAULTS = 4  # leave the fault state (-> disabled) once its causes are gone
     SUMMARY_HARMONICS = 5  # payload: summaries carry harmonics 1..n at least (n 1..10), within the frame budget
 

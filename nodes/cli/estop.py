@@ -1,7 +1,7 @@
 """Emergency stop: write the top-priority ESTOP frame straight to the CAN bus.
 
 No ROS, no handshake, no state: it works whatever the nodes are doing (or if none runs). The
-device ramps to zero within its e-stop ramp (10 ms) and latches ESTOP until reset
+device ramps to zero within its e-stop ramp (100 ms) and latches ESTOP until reset
 (`ppod estop --reset` asks the waveform generator to reset it).
 The bus is the device description's (config/device.yaml: can.interface and can.channel), or the
 simulated device's bridge when a `ppod up --sim` is running, or what --interface/--channel say.

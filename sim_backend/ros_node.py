@@ -18,6 +18,7 @@ its firmware (watchdog, e-stop) protects it whatever the host does.
 from __future__ import annotations
 
 import math
+import os
 import threading
 from importlib import resources
 from pathlib import Path
@@ -39,7 +40,7 @@ from ppod_ros.motion import acceleration_error
 from ppod_ros.vision import CameraConfig
 from ppod_sim.camera import RenderedFrame
 from ppod_sim.scene import load_scene
-from ppod_sim.truth import CycleTruth
+from ppod_sim.truth import CycleTruth, save_cycles
 from ppod_sim.world import PartsTruth, SimWorld
 
 SCENARIO = topics.SIM_SCENARIO
@@ -100,6 +101,12 @@ class SimDeviceNode(Node):
         self.world.on_cycle.append(self._on_cycle)
         self.world.on_frame.append(self._on_frame)
         self.world.on_tick.append(self._on_tick)
+        # PPOD_SIM_RECORD_CYCLES=FILE.npz: keep every cycle's plate motion and store it on the way
+        # out, to replay the run's parts physics (ppod bench sim_parts --cycles FILE.npz).
+        self._record_path = os.environ.get("PPOD_SIM_RECORD_CYCLES") or None
+        self._recorded: list[CycleTruth] = []
+        if self._record_path:
+            self.world.on_cycle.append(lambda truth, _parts: self._recorded.append(truth))
         self.create_timer(0.5, self._update_camera_enable)  # wall time: renders only while watched
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self.world.run, kwargs={"stop": self._stop}, daemon=True,
@@ -193,6 +200,9 @@ class SimDeviceNode(Node):
         self._thread.join(timeout=5)
         self.world.close()
         w = self.world
+        if self._record_path:
+            save_cycles(self._record_path, self._recorded)
+            self.get_logger().info(f"recorded {len(self._recorded)} cycles to {self._record_path}")
         self.get_logger().info(f"simulated {w.device.time_s:.1f} s of device time; parts physics "
                                f"{w.physics_s:.2f} s; {w.frames_rendered} frames rendered, {w.frames_dropped} dropped; "
                                f"device clock at most {1e3 * w.process.pacer.max_lag_s:.0f} ms behind real time, "

@@ -39,6 +39,9 @@ from ppod_sim.truth import CycleTruth
 
 log = logging.getLogger(__name__)
 
+#: The parts physics' solver settings (one thread: see SimWorld.__init__).
+SIM_SOLVER = SolverSettings(threads=1)
+
 
 @dataclass(frozen=True)
 class PartsTruth:
@@ -79,7 +82,7 @@ class SimWorld:
         self.device = self.process.device
         # The parts physics runs beside the device loop: one thread, so no call ever waits for a
         # second thread or loads a parallel kernel mid-run (a stall there delays device time).
-        solver = solver if solver is not None else SolverSettings(threads=1)
+        solver = solver if solver is not None else SIM_SOLVER
         self.dynamics = PartDynamics([p.part for p in scene.parts], scene.poses, settings=solver,
                                      time_s=self.device.time_s)
         self.circles = pack_circles([p.circles for p in scene.parts])  # packed once, not per cycle

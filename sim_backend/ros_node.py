@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import os
 import threading
+import time
 from importlib import resources
 from pathlib import Path
 
@@ -196,6 +197,7 @@ class SimDeviceNode(Node):
 
     def finalize(self) -> None:
         """Stop the simulation thread and close the bridge (called by run_node on the way out)."""
+        cpu = _thread_cpu_seconds()  # before the threads end
         self._stop.set()
         self._thread.join(timeout=5)
         self.world.close()
@@ -208,6 +210,19 @@ class SimDeviceNode(Node):
                                f"device clock at most {1e3 * w.process.pacer.max_lag_s:.0f} ms behind real time, "
                                f"slipped {w.process.pacer.slipped_s:.2f} s in {w.process.pacer.slips} stalls; "
                                f"waited {w.backpressure_s:.2f} s for the parts physics")
+        self.get_logger().info(f"CPU {time.process_time():.2f} s in all, by thread (live at the end): "
+                               + ", ".join(f"{name} {sec:.2f} s" for name, sec in cpu))
+
+
+def _thread_cpu_seconds() -> list[tuple[str, float]]:
+    """CPU seconds of every live thread of this process, by name (largest first)."""
+    out = []
+    for t in threading.enumerate():
+        try:
+            out.append((t.name, time.clock_gettime(time.pthread_getcpuclockid(t.ident))))
+        except (OSError, TypeError, AttributeError):
+            continue
+    return sorted(out, key=lambda item: -item[1])
 
 
 main = make_main(SimDeviceNode)

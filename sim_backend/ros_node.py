@@ -18,7 +18,9 @@ its firmware (watchdog, e-stop) protects it whatever the host does.
 from __future__ import annotations
 
 import math
+import os
 import threading
+import time
 from importlib import resources
 from pathlib import Path
 
@@ -39,7 +41,7 @@ from ppod_ros.motion import acceleration_error
 from ppod_ros.vision import CameraConfig
 from ppod_sim.camera import RenderedFrame
 from ppod_sim.scene import load_scene
-from ppod_sim.truth import CycleTruth
+from ppod_sim.truth import CycleTruth, save_cycles
 from ppod_sim.world import PartsTruth, SimWorld
 
 SCENARIO = topics.SIM_SCENARIO
@@ -100,6 +102,12 @@ class SimDeviceNode(Node):
         self.world.on_cycle.append(self._on_cycle)
         self.world.on_frame.append(self._on_frame)
         self.world.on_tick.append(self._on_tick)
+        # PPOD_SIM_RECORD_CYCLES=FILE.npz: keep every cycle's plate motion and store it on the way
+        # out, to replay the run's parts physics (ppod bench sim_parts --cycles FILE.npz).
+        self._record_path = os.environ.get("PPOD_SIM_RECORD_CYCLES") or None
+        self._recorded: list[CycleTruth] = []
+        if self._record_path:
+            self.world.on_cycle.append(lambda truth, _parts: self._recorded.append(truth))
         self.create_timer(0.5, self._update_camera_enable)  # wall time: renders only while watched
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self.world.run, kwargs={"stop": self._stop}, daemon=True,
@@ -189,15 +197,32 @@ class SimDeviceNode(Node):
 
     def finalize(self) -> None:
         """Stop the simulation thread and close the bridge (called by run_node on the way out)."""
+        cpu = _thread_cpu_seconds()  # before the threads end
         self._stop.set()
         self._thread.join(timeout=5)
         self.world.close()
         w = self.world
+        if self._record_path:
+            save_cycles(self._record_path, self._recorded)
+            self.get_logger().info(f"recorded {len(self._recorded)} cycles to {self._record_path}")
         self.get_logger().info(f"simulated {w.device.time_s:.1f} s of device time; parts physics "
                                f"{w.physics_s:.2f} s; {w.frames_rendered} frames rendered, {w.frames_dropped} dropped; "
                                f"device clock at most {1e3 * w.process.pacer.max_lag_s:.0f} ms behind real time, "
                                f"slipped {w.process.pacer.slipped_s:.2f} s in {w.process.pacer.slips} stalls; "
                                f"waited {w.backpressure_s:.2f} s for the parts physics")
+        self.get_logger().info(f"CPU {time.process_time():.2f} s in all, by thread (live at the end): "
+                               + ", ".join(f"{name} {sec:.2f} s" for name, sec in cpu))
+
+
+def _thread_cpu_seconds() -> list[tuple[str, float]]:
+    """CPU seconds of every live thread of this process, by name (largest first)."""
+    out = []
+    for t in threading.enumerate():
+        try:
+            out.append((t.name, time.clock_gettime(time.pthread_getcpuclockid(t.ident))))
+        except (OSError, TypeError, AttributeError):
+            continue
+    return sorted(out, key=lambda item: -item[1])
 
 
 main = make_main(SimDeviceNode)

@@ -91,4 +91,29 @@ class TruthWriter:
         self.file.close()
 
 
-__all__ = ["CycleTruth", "TruthWriter"]
+def save_cycles(path: str | Path, cycles: list[CycleTruth]) -> None:
+    """Store the cycles' start times, frequencies and acceleration harmonics (what the parts physics
+    reads: :meth:`SimWorld.advance_parts <ppod_sim.world.SimWorld.advance_parts>`) in an ``.npz``
+    file, for replaying a run's parts physics (``ppod bench sim_parts``)."""
+    np.savez_compressed(
+        path,
+        cycle_index=np.array([c.cycle_index for c in cycles], np.int64),
+        start_time_s=np.array([c.start_time_s for c in cycles]),
+        frequency_hz=np.array([c.frequency_hz for c in cycles]),
+        table_seq=np.array([c.table_seq for c in cycles], np.int64),
+        amplitude_scale=np.array([c.amplitude_scale for c in cycles]),
+        accel=np.array([c.accel for c in cycles]),
+    )
+
+
+def load_cycles(path: str | Path) -> list[CycleTruth]:
+    """The cycles :func:`save_cycles` stored (samples and peaks, not stored, are empty)."""
+    with np.load(path) as d:
+        empty = np.zeros(0)
+        return [CycleTruth(int(d["cycle_index"][k]), float(d["start_time_s"][k]), float(d["frequency_hz"][k]),
+                           int(d["table_seq"][k]), float(d["amplitude_scale"][k]), d["accel"][k], np.zeros((0, 6)),
+                           empty, empty, empty, empty)
+                for k in range(d["start_time_s"].size)]
+
+
+__all__ = ["CycleTruth", "TruthWriter", "load_cycles", "save_cycles"]

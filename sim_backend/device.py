@@ -13,9 +13,9 @@ are referenced to the cycle start (t = 0 at the first sample of each cycle).
 State machine (DeviceState): DISABLED -ENABLE-> ENABLED (RAMPING while a ramp runs); DISABLE ramps to
 zero then DISABLED; no heartbeat for ``watchdog_timeout_s`` -> WATCHDOG (ramp to zero within
 ``watchdog_ramp_s``; ENABLE resumes); ESTOP from any state -> ramp to zero within ``estop_ramp_s``,
-latched until RESET_ESTOP (to FAULT instead of DISABLED when a stopping fault was raised meanwhile); a
-stopping fault (thermal, voltage, stroke, over-current) -> FAULT,
-ramped to zero, until CLEAR_FAULTS. After any stop the active table is zero.
+latched until RESET_ESTOP (then DISABLED, or FAULT when a stopping fault was raised meanwhile); a
+stopping fault (thermal, voltage, stroke, over-current) -> FAULT, ramped to zero within
+``watchdog_ramp_s``, until CLEAR_FAULTS. After any stop the active table is zero.
 """
 
 from __future__ import annotations

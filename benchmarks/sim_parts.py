@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import ast
 import logging
+import sys
 import time
 from importlib import resources
 from pathlib import Path
@@ -118,7 +119,14 @@ def run(args: argparse.Namespace) -> int:
     from ppod_sim.scene import load_scene
     from ppod_sim.truth import load_cycles
 
-    cycles = load_cycles(args.cycles)
+    try:
+        cycles = load_cycles(args.cycles)
+    except (OSError, ValueError, KeyError, EOFError) as exc:  # missing, not an .npz, not a recording
+        print(f"ppod bench sim_parts: {args.cycles}: not a recording of plate cycles ({exc})", file=sys.stderr)
+        return 2
+    if not cycles:
+        print(f"ppod bench sim_parts: {args.cycles}: no cycles recorded", file=sys.stderr)
+        return 2
     if args.cycles_limit:
         cycles = cycles[:args.cycles_limit]
     scene = load_scene(args.scene) if args.scene else None

@@ -72,3 +72,24 @@ def test_recorded_cycles_round_trip(tmp_path):
     for a, b in zip(back, cycles, strict=True):
         np.testing.assert_array_equal(a.accel, b.accel)
         assert a.motion(absolute_time=True).period_s == b.motion(absolute_time=True).period_s
+
+
+def test_the_benchmark_replays_a_recording_and_refuses_a_bad_file_in_one_line(tmp_path, capsys):
+    import argparse
+
+    from ppod_bench import sim_parts
+
+    def run(*argv):
+        parser = argparse.ArgumentParser()
+        sim_parts.add_arguments(parser)
+        return sim_parts.run(parser.parse_args(list(argv)))
+
+    assert run("--cycles", str(PIVOT), "--cycles-limit", "3", "--repeats", "1", "--settings", "world", "default") == 0
+    out = capsys.readouterr().out
+    assert "3 cycles" in out and "friction_eps_mps=3e-06" in out
+    bad = tmp_path / "bad.npz"
+    bad.write_text("not a recording")
+    for path in (bad, tmp_path / "missing.npz"):
+        assert run("--cycles", str(path)) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "not a recording of plate cycles" in err

@@ -92,7 +92,7 @@ def advance_part(i, kind, mc, Pall, Y, AUX, H, t0, t1, T, kmax, A, B, C, E, E3, 
     steps[i] += stats[1]
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@njit(cache=True, error_model="numpy", parallel=True, nogil=True)
 def advance_group(kind, mc, Pall, Y, AUX, H, t0, t1, T, kmax, A, B, C, E, E3, S, status, stick_time, steps):
     """Advance every part of one kind from local time t0 to t1 in place, in parallel over parts.
 
@@ -107,7 +107,7 @@ def advance_group(kind, mc, Pall, Y, AUX, H, t0, t1, T, kmax, A, B, C, E, E3, S,
                          steps, max_steps)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def advance_group_serial(kind, mc, Pall, Y, AUX, H, t0, t1, T, kmax, A, B, C, E, E3, S, status, stick_time,
                          steps):
     """:func:`advance_group` on the calling thread only (same results, no thread wake-up stall)."""

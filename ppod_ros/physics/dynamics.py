@@ -133,7 +133,9 @@ class PartDynamics:
             raise ConfigError(f"settings: expected SolverSettings, got {type(self.settings).__name__}")
         self._time = _finite(time_s, "time_s")
         self.parts = parts
-        self._lock = threading.Lock()
+        # The kernels release the GIL (the simulated device's other threads run meanwhile): state and
+        # set_parts take the same (reentrant) lock as advance, so no reader sees a half-advanced state.
+        self._lock = threading.RLock()
         kinds = np.array([0 if isinstance(p, PointPart) else 1 for p in parts], int)
         # The serial kernels of the kinds present (the parallel ones load when first needed).
         self.setup_seconds = ensure_compiled(*sorted({("dyn", int(k), False) for k in kinds})) if kinds.size else 0.0
@@ -157,6 +159,10 @@ class PartDynamics:
 
     @property
     def state(self) -> DynamicsState:
+        with self._lock:
+            return self._state()
+
+    def _state(self) -> DynamicsState:
         n = len(self.parts)
         cfg = np.zeros((n, 3))
         tw = np.zeros((n, 3))
@@ -181,6 +187,10 @@ class PartDynamics:
     def set_parts(self, indices: Any, configurations: Any, twists: Any = None) -> None:
         """:meth:`set_part` for several parts at once: ``configurations`` (M, 2 or 3), ``twists``
         (M, 2 or 3) or None (rest)."""
+        with self._lock:
+            self._set_parts(indices, configurations, twists)
+
+    def _set_parts(self, indices: Any, configurations: Any, twists: Any) -> None:
         idx = np.asarray(indices, dtype=np.int64).reshape(-1)
         if idx.size == 0:
             return

@@ -93,3 +93,48 @@ def test_the_benchmark_replays_a_recording_and_refuses_a_bad_file_in_one_line(tm
         assert run("--cycles", str(path)) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "not a recording of plate cycles" in err
+
+
+def test_the_parts_physics_kernels_release_the_gil_and_readers_wait_for_a_whole_step():
+    # The simulated device's clock, camera and ROS threads share the process with the parts
+    # physics: a kernel holding the GIL for a stick-slip stretch (up to a second of CPU per second of
+    # device time before issue 16's settings) stalled them all.
+    import threading
+
+    from ppod_ros.physics import _dynamics_kernel as kernels
+    from ppod_ros.physics._jit import materialise
+
+    materialise()
+    for kernel in (kernels.advance_group_serial, kernels.advance_group):
+        assert getattr(kernel, "dispatcher", kernel).targetoptions.get("nogil") is True
+    cycles = load_cycles(PIVOT)[:6]
+    with np.load(PIVOT) as d:
+        q0 = d["bracket_configuration"]
+
+    def fresh():
+        return PartDynamics([load_scene(default_scene_path()).parts[0].part], [q0],
+                            time_s=cycles[0].start_time_s, settings=SIM_SOLVER)
+
+    serial = fresh()
+    expected = {serial.state.time_s: serial.state.configurations.tobytes()}
+    for c in cycles:
+        st = serial.advance(c.motion(absolute_time=True), c.start_time_s, 1.0 / c.frequency_hz)
+        expected[st.time_s] = st.configurations.tobytes()
+    dyn = fresh()
+    reads, stop = [], threading.Event()
+
+    def read():
+        while not stop.is_set():
+            st = dyn.state
+            reads.append((st.time_s, st.configurations.tobytes()))
+
+    reader = threading.Thread(target=read)
+    reader.start()
+    try:
+        for c in cycles:
+            dyn.advance(c.motion(absolute_time=True), c.start_time_s, 1.0 / c.frequency_hz)
+    finally:
+        stop.set()
+        reader.join()
+    # Every read saw the state at a cycle boundary, whole (pose and time together), as the serial run.
+    assert reads and all(expected.get(t) == cfg for t, cfg in reads)

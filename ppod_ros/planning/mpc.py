@@ -428,9 +428,14 @@ def _template_spin(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list
     """A rigid part turned in place, both ways: the spin (fitted at the centre) moved to the part."""
     if goal.theta_rad is None or not isinstance(planner.parts[goal.index], RigidPart):
         return []
+    return _spins_about(planner, goal, pose[:2], "spin")
+
+
+def _spins_about(planner: MultiTask, goal: PartGoal, centre, kind: str) -> list[PlateMotion]:
+    """The spin (fitted at the centre) moved to ``centre``, both ways, named ``kind+@i`` / ``kind-@i``."""
     base = planner._fitted(spin_motion(planner.settings))
-    return [moved(base, float(pose[0]), float(pose[1]), mirror=reverse,
-                  name=f"spin{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
+    return [moved(base, float(centre[0]), float(centre[1]), mirror=reverse,
+                  name=f"{kind}{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
 
 
 def pivot_point(pose: np.ndarray, goal: PartGoal, angle_rad: float) -> np.ndarray | None:
@@ -449,11 +454,7 @@ def _template_pivot(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> lis
     """A rigid part turned about its pivot (MpcSettings.pivot_from_rad), both ways: the spin moved to
     the pivot, where the part turns as in place and is carried along the circle about it."""
     c = planner._pivot(goal, pose)
-    if c is None:
-        return []
-    base = planner._fitted(spin_motion(planner.settings))
-    return [moved(base, float(c[0]), float(c[1]), mirror=reverse,
-                  name=f"pivot{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
+    return [] if c is None else _spins_about(planner, goal, c, "pivot")
 
 
 def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
@@ -1204,14 +1205,14 @@ class MultiTask:
                 weight[k] = s.hold_weight
         return way, weight
 
-    def _angle_weights(self, statuses: list[PartStatus], poses: np.ndarray | None = None) -> np.ndarray:
+    def _angle_weights(self, statuses: list[PartStatus], poses: np.ndarray) -> np.ndarray:
         """Per goal, the weight of an angle error (m/rad): full within ``angle_from_m`` of the goal,
-        falling as angle_from_m / distance beyond it; full for a part turned about its pivot (``poses``
-        given; ``MpcSettings.pivot_from_rad``)."""
+        falling as angle_from_m / distance beyond it; full for a part turned about its pivot
+        (``MpcSettings.pivot_from_rad``)."""
         s = self.settings
         d = np.array([st.position_error_m if math.isfinite(st.position_error_m) else 0.0 for st in statuses])
         w = s.angle_weight_m_per_rad * np.minimum(1.0, s.angle_from_m / np.maximum(d, 1e-9))
-        if poses is not None and s.pivot_from_rad > 0:
+        if s.pivot_from_rad > 0:
             for k, g in enumerate(self.goals):
                 if self._pivot(g, poses[g.index]) is not None:
                     w[k] = s.angle_weight_m_per_rad

@@ -18,12 +18,17 @@ from ppod_sim.world import SIM_SOLVER, SimWorld
 PIVOT = Path(__file__).resolve().parents[1] / "data" / "sim_pivot_cycles.npz"
 
 
-def _pivot(settings):
-    cycles = load_cycles(PIVOT)
+def _bracket_at_the_pivot(settings, cycles):
+    """The demo's bracket in its recorded state at the start of ``cycles``, on its own dynamics."""
     with np.load(PIVOT) as d:
         q0, v0 = d["bracket_configuration"], d["bracket_twist"]
     bracket = load_scene(default_scene_path()).parts[0].part
-    dyn = PartDynamics([bracket], [q0], [v0], time_s=cycles[0].start_time_s, settings=settings)
+    return PartDynamics([bracket], [q0], [v0], time_s=cycles[0].start_time_s, settings=settings)
+
+
+def _pivot(settings):
+    cycles = load_cycles(PIVOT)
+    dyn = _bracket_at_the_pivot(settings, cycles)
     poses = []
     for c in cycles:
         state = dyn.advance(c.motion(absolute_time=True), c.start_time_s, 1.0 / c.frequency_hz)
@@ -108,19 +113,12 @@ def test_the_parts_physics_kernels_release_the_gil_and_readers_wait_for_a_whole_
     for kernel in (kernels.advance_group_serial, kernels.advance_group):
         assert getattr(kernel, "dispatcher", kernel).targetoptions.get("nogil") is True
     cycles = load_cycles(PIVOT)[:6]
-    with np.load(PIVOT) as d:
-        q0 = d["bracket_configuration"]
-
-    def fresh():
-        return PartDynamics([load_scene(default_scene_path()).parts[0].part], [q0],
-                            time_s=cycles[0].start_time_s, settings=SIM_SOLVER)
-
-    serial = fresh()
+    serial = _bracket_at_the_pivot(SIM_SOLVER, cycles)
     expected = {serial.state.time_s: serial.state.configurations.tobytes()}
     for c in cycles:
         st = serial.advance(c.motion(absolute_time=True), c.start_time_s, 1.0 / c.frequency_hz)
         expected[st.time_s] = st.configurations.tobytes()
-    dyn = fresh()
+    dyn = _bracket_at_the_pivot(SIM_SOLVER, cycles)
     reads, stop = [], threading.Event()
 
     def read():

@@ -484,6 +484,29 @@ def test_focus_never_lowers_the_weight_of_a_part_held_at_its_goal():
     assert weight[2] == s.focus_others                  # another unfinished part: lowered
 
 
+def test_focus_on_a_part_near_its_goal_lowers_the_held_parts_weights():
+    # The endgame: a bracket within a few mm of its goal but degrees off, two washers held. Every
+    # motion that turns the bracket moves the washers, so with their full weight the planner kept
+    # weak motions that let the bracket stick (the demo: 5-8 deg off for 60 s).
+    goals = [PartGoal(0, 0.02, -0.02, 0.0, 2e-3, math.radians(3)), PartGoal(1, -0.03, 0.02, None, 2e-3),
+             PartGoal(2, 0.03, 0.03, None, 2e-3)]
+    task = MultiTask([published_rigid_part(), PointPart(0.3), PointPart(0.3)], goals)
+    s = task.settings
+    task.t0 = 0.0
+    near = np.array([[0.0205, -0.0205, math.radians(6)], [-0.0302, 0.0203, 0.0], [0.0301, 0.0298, 0.0]])
+    task.focus = 0
+    _way, weight = task._waypoints(near, task._statuses(0.0, near))
+    np.testing.assert_allclose(weight, [1.0, s.hold_weight * s.focus_held, s.hold_weight * s.focus_held])
+    # Far from its goal position, the focus never lowers a held part's weight (a motion that turned
+    # the focused bracket threw a washer off its goal at 13 mm/s: benchmark scene 7 of 3 parts).
+    far = near.copy()
+    far[0, :2] = [0.03, -0.03]
+    _way, weight = task._waypoints(far, task._statuses(0.0, far))
+    np.testing.assert_allclose(weight, [1.0, s.hold_weight, s.hold_weight])
+    with pytest.raises(ConfigError, match="focus_held"):
+        MpcSettings(focus_held=-0.1)
+
+
 def test_a_held_part_is_asked_back_into_the_zone_where_the_plate_may_stop():
     # Asked to stay where it was, a held part crept outwards step by step under the motions that
     # served the others (the waypoint moved with it): a washer held from 1.3 mm was 1.98 mm from its

@@ -25,11 +25,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 
+from ppod_ros.actuation.envelope import PlantTolerance
 from ppod_ros.errors import ConfigError, LimitError
 from ppod_ros.motion import PlateMotion
 
@@ -42,41 +42,6 @@ def _envelope(device):
     from ppod_ros.actuation.envelope import Envelope
 
     return Envelope(device)
-
-
-@dataclass(frozen=True)
-class PlantTolerance:
-    """Actuator errors the planner leaves room for: per actuator a gain error up to ``gain``
-    (fraction) and a phase error up to ``phase_deg``, and cross-coupling up to ``coupling``
-    (fraction), as ``samples`` fixed draws (``seed``) of ``M = diag(g e^{i phi}) (1 + C)``."""
-
-    gain: float = 0.15
-    phase_deg: float = 10.0
-    coupling: float = 0.05
-    samples: int = 12
-    seed: int = 0
-
-    def __post_init__(self):
-        for name in ("gain", "phase_deg", "coupling"):
-            v, top = getattr(self, name), (90.0 if name == "phase_deg" else 0.5)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v < top):
-                raise ConfigError(f"plant tolerance {name}: expected 0 <= value < {top:g}, got {v!r}")
-        if not (isinstance(self.samples, int) and 1 <= self.samples <= 64):
-            raise ConfigError(f"plant tolerance samples: expected 1..64, got {self.samples!r}")
-
-    def matrices(self) -> np.ndarray:
-        """The drawn actuator error matrices M, (samples, 6, 6) complex."""
-        rng = np.random.default_rng(self.seed)
-        out = np.empty((self.samples, 6, 6), complex)
-        for s in range(self.samples):
-            # Uniform within the tolerance, as the simulated device draws its own (corner draws cost a
-            # further 20 % of amplitude for the last 2 % of plants: their corrections are scaled a little).
-            g = 1.0 + self.gain * rng.uniform(-1.0, 1.0, 6)
-            ph = np.deg2rad(self.phase_deg) * rng.uniform(-1.0, 1.0, 6)
-            c = rng.uniform(-self.coupling, self.coupling, (6, 6))
-            np.fill_diagonal(c, 0.0)
-            out[s] = np.diag(g * np.exp(1j * ph)) @ (np.eye(6) + c)
-        return out
 
 
 @lru_cache(maxsize=64)

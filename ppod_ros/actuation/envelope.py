@@ -328,7 +328,7 @@ class PlantTolerance:
     def is_zero(self) -> bool:
         return self.gain == 0 and self.phase_deg == 0 and self.coupling == 0
 
-    def factor_hull(self, segments: int = 10) -> np.ndarray:
+    def factor_hull(self, segments: int = 4) -> np.ndarray:
         """Complex points whose convex hull contains every per-actuator factor ``g e^{i phi}`` within
         the tolerance: the outer arc's points, the corners of the polygon circumscribing it
         (``segments`` pieces) and the two inner corners. Every real quantity linear in ``M`` takes its
@@ -351,7 +351,7 @@ def worst_over_plants(W: np.ndarray, tolerance: PlantTolerance) -> tuple[np.ndar
     With ``M = diag(u) (1 + C)`` row ``l`` contributes ``Re(u_l W_ll) + sum_m C_lm Re(u_l W_lm)``; rows
     are independent, each coupling entry takes the sign that helps (``+-coupling``), and a convex
     function of ``u_l`` is largest at a vertex of :meth:`PlantTolerance.factor_hull`. So the result is
-    exact up to the hull (a bound at most 1.5e-4 relative above the true worst). Returns (max y, -min y),
+    exact up to the hull (a bound at most 1e-3 relative above the true worst: 1 / cos 2.5 deg). Returns (max y, -min y),
     each of shape ``W.shape[:-2]``."""
     W = np.asarray(W, dtype=complex)
     shape = W.shape[:-2] + (6,)
@@ -510,6 +510,41 @@ class Envelope:
             grow = np.divide(legs, legs_linear, out=np.ones(6), where=np.asarray(legs_linear) > 0)
             legs = legs + excess * grow**2
         return {"leg": legs, "current": peaks[:6], "voltage": peaks[12:18]}
+
+    def drive_ratio(self, motion: PlateMotion, allowance: PlantTolerance, enough: float = 1.0,
+                    nominal: EnvelopeReport | None = None) -> float:
+        """The largest ratio of the :data:`DRIVE_LIMITS` of ``motion``'s nominal feed-forward table over
+        every plant within ``allowance`` (:meth:`check_table` with it), for a planner that must stay
+        within what the generator accepts. When a quick bound is at most ``enough``, that bound is
+        returned instead (an upper bound; the checker's own value is computed only above it): the
+        nominal peak (``nominal``: the motion's :meth:`check_motion` report, computed if not given)
+        plus the triangle inequality's bound of what ``M - 1`` adds, the stroke with 3 % more for the
+        growth of the legs' second-order terms (0.5 % of the stroke's first harmonic at 65 % of it)."""
+        active = motion.pruned()
+        if active.is_zero():
+            return 0.0
+        f = float(active.frequency_hz)
+        I = self.plant.feedforward(active, int(active.k.max()))
+        if nominal is None:
+            nominal = self.check_motion(active)
+        rows = np.flatnonzero(np.any(I != 0, axis=1))
+        resp = self.plant.responses(f * (rows + 1.0), ("leg", "voltage"))
+        A = np.abs(I[rows])                                                      # (K, 6)
+        # |((M - 1) I)_l| <= |u_l - 1| |I_l| + |u_l| coupling sum_{m != l} |I_m|, harmonic by harmonic.
+        hull = allowance.factor_hull()
+        dI = (float(np.max(np.abs(hull - 1.0))) * A
+              + float(np.max(np.abs(hull))) * allowance.coupling * (A.sum(axis=1, keepdims=True) - A))
+        lim, v = self.config.limits, nominal.values
+        quick = max((v["limits.coil_current_a"] + float(np.max(dI.sum(axis=0)))) / lim.coil_current_a,
+                    1.03 * (v["limits.leg_stroke_m"] + float(np.max(np.einsum("kol,kl->o", np.abs(resp["leg"]), dI))))
+                    / lim.leg_stroke_m,
+                    (v["limits.amplifier_voltage_v"]
+                     + float(np.max(np.einsum("kol,kl->o", np.abs(resp["voltage"]), dI))))
+                    / lim.amplifier_voltage_v)
+        if quick <= enough:
+            return quick
+        report = self.check_table(f, I, allowance)
+        return max(report.ratios[name] for name in DRIVE_LIMITS)
 
     def check_motion(self, motion: PlateMotion, currents: np.ndarray | None = None) -> EnvelopeReport:
         """The envelope of a plate motion: its own peaks, margin and exact stroke, and its table's

@@ -35,6 +35,9 @@ from ppod_ros.motion import PlateMotion
 
 #: Shrink factor per retry when a scaled motion still lands a hair over (refined extrema, rounding).
 RETRY_STEP = 0.98
+#: The drive limits' largest ratio over the plants within ``limits.plant_uncertainty`` a fitted motion
+#: may use (the generator accepts 1; the table's quantisation and rows change it by far less).
+DRIVE_FIT = 0.999
 
 
 @lru_cache(maxsize=8)
@@ -140,9 +143,19 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
     robust = ([0.0] * len(todo) if tolerance is None else
               [max(corrected_motion_ratios(motions[i], device, tolerance).values()) / (1.0 + allowance)
                for i in todo])
+    # The generator accepts a goal only if its drive limits hold on every plant within the device's
+    # limits.plant_uncertainty (GoalPlanner.plan): that allowance is the goal's room for the plant,
+    # so these limits are kept at DRIVE_FIT (read as max_ratio), not with the headroom on top.
+    unmeasured = PlantTolerance.from_limits(device.limits)
+
+    def drive(motion: PlateMotion, report) -> float:
+        if unmeasured.is_zero():
+            return 0.0
+        return envelope.drive_ratio(motion, unmeasured, DRIVE_FIT, report) / DRIVE_FIT
+
     pending = []
     for i, report, rob in zip(todo, reports, robust):
-        worst = max(report.worst()[1], rob)
+        worst = max(report.worst()[1], rob, drive(motions[i], report) * max_ratio)
         if worst <= max_ratio:
             out[i] = (motions[i], 1.0)   # within as it is: the checker's report above is its own
         else:
@@ -154,7 +167,7 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
         candidates = [motions[i].scaled(scale) for i, scale in pending]
         still = []
         for (i, scale), candidate, report in zip(pending, candidates, envelope.check_motions(candidates)):
-            if report.within(max_ratio):
+            if report.within(max_ratio) and drive(candidate, report) <= 1.0:
                 out[i] = (candidate, scale)
             else:
                 last[i] = report
@@ -163,7 +176,9 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
     if not pending:
         return out  # type: ignore[return-value]
     i, scale = pending[0]
-    err = last[i].error(max_ratio)
+    err = last[i].error(max_ratio) or LimitError(
+        f"the drive limits on a plant within limits.plant_uncertainty ({unmeasured.describe()})",
+        limit="limits.leg_stroke_m", limit_value=math.nan, requested=math.nan)
     raise LimitError(f"motion: not within the device envelope with {100 * headroom:.0f} % headroom even at "
                      f"{100 * scale:.1f} % amplitude ({err})", limit=err.limit, limit_value=err.limit_value,
                      requested=err.requested)

@@ -215,15 +215,18 @@ def _random_goal(rng, lim):
 
 
 def _spin_goal(rng, planner, lim):
-    """A 30 Hz turn about z with some translation, scaled to 60-95 % of the legs' stroke (None if the
-    envelope refuses it anyway)."""
+    """A 30 Hz turn about z with some translation, scaled to 60-95 % of the legs' stroke on the worst
+    plant the checker allows for (``limits.plant_uncertainty``; on the nominal plant about 0.69 of
+    that) (None if the envelope refuses it anyway)."""
     from ppod_ros.errors import ConfigError, LimitError
     from ppod_ros.motion import PlateMotion
 
     amp = np.concatenate([rng.uniform(0, 10, 2), rng.uniform(0, 1, 1), rng.uniform(0, 40, 2), [300.0]])
     goal = PlateMotion.single(30, amp, rng.uniform(0, 2 * math.pi, 6), name="spin", ramp_time_s=0.5)
     try:
-        use = float(np.max(planner.plan(goal.scaled(0.1)).stroke_peak_m)) * 10 / lim.leg_stroke_m
+        small = planner.plan(goal.scaled(0.1))
+        report = planner.envelope.check_table(small.frequency_hz, small.currents_a, planner.allowance)
+        use = report.ratios["limits.leg_stroke_m"] * 10
         goal = goal.scaled(rng.uniform(0.6, 0.95) / use)
         planner.plan(goal)
     except (ConfigError, LimitError):
@@ -354,10 +357,10 @@ def campaign(n_goals: int, seed: int, drop: float, corrupt: float, progress=None
         goal = _random_goal(rng, lim)
         reversal = rng.random() < reversals
         if reversal:
-            # A spin at 60-95 % of the legs' stroke played, then reversed (the planner turning a part
-            # the other way), with a correction 0-60 ms into the reversal's ramp: corrections must not
-            # shorten the goal's ramp (crossfaded in 50 ms, the legs overshoot the stroke and the
-            # device faults).
+            # A spin at 60-95 % of the stroke the checker allows (on its worst plant) played, then
+            # reversed (the planner turning a part the other way), with a correction 0-60 ms into the
+            # reversal's ramp: corrections must not shorten the goal's ramp (crossfaded in 50 ms, the
+            # legs overshoot the stroke and the device faults).
             spin = _spin_goal(rng, gen.planner, lim)
             if spin is not None:
                 guarded("submit", gen.submit, spin)

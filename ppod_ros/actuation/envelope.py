@@ -220,6 +220,10 @@ class EnvelopeReport:
     limits: dict[str, float]
     forbidden_rows: tuple[int, ...] = ()
     worst_actuator: dict[str, int] = field(default_factory=dict)
+    allowance: PlantTolerance | None = None
+    nominal_ratios: dict[str, float] | None = None
+    #: Limits whose value is the worst over the plants within ``allowance`` (over the nominal plant's).
+    plant_bound: frozenset[str] = frozenset()
 
     def within(self, max_ratio: float = 1.0) -> bool:
         """True when every ratio is at most ``max_ratio`` (1: on the limits; 1 / 1.15: 15 % headroom)."""
@@ -228,6 +232,11 @@ class EnvelopeReport:
     def over(self, max_ratio: float = 1.0) -> list[str]:
         """Limit names whose ratio exceeds ``max_ratio``, in checking order."""
         return [name for name in LIMIT_ORDER if self.ratios.get(name, 0.0) > max_ratio]
+
+    def nominal_ratio(self, name: str) -> float:
+        """The ratio of limit ``name`` on the nominal plant alone (the same as ``ratios`` without an allowance)."""
+        source = self.nominal_ratios if self.nominal_ratios is not None else self.ratios
+        return source.get(name, 0.0)
 
     def worst(self) -> tuple[str, float]:
         """(limit name, ratio) of the largest ratio."""
@@ -251,12 +260,126 @@ class EnvelopeReport:
             )
         where = f" of actuator {self.worst_actuator[name]}" if name in self.worst_actuator else ""
         relation = "is below" if name == "limits.contact_margin_mps2" else "exceeds"
+        plants = ""
+        if name in self.plant_bound and self.allowance is not None:
+            plants = (f" on a plant within limits.plant_uncertainty ({self.allowance.describe()}; the plant is "
+                      f"not measured yet; {self.ratios[name] / self.nominal_ratio(name):.3g}x the nominal plant's)")
         return LimitError(
-            f"{_WHAT[name]}{where} {value:.4g} {unit} {relation} {name} = {limit:g} {unit}",
+            f"{_WHAT[name]}{where} {value:.4g} {unit} {relation} {name} = {limit:g} {unit}{plants}",
             limit=name,
             limit_value=limit,
             requested=value,
         )
+
+
+@dataclass(frozen=True)
+class PlantTolerance:
+    """Actuator errors of the real plant against the nominal model: per actuator a gain error up to
+    ``gain`` (fraction) and a phase error up to ``phase_deg``, and cross-coupling up to ``coupling``
+    (fraction): the drive the plant plays is ``M I`` for a commanded table ``I``, with
+    ``M = diag(g e^{i phi}) (1 + C)`` (as the simulated device's drive, ``ppod_sim.drive``).
+
+    The checker (:meth:`Envelope.check_table` with ``allowance``) bounds a table's limits over *every*
+    plant within the tolerance (:func:`worst_over_plants`); the planner's fitting uses ``samples``
+    fixed draws (``seed``) of M (:meth:`matrices`, ``ppod_ros.planning.envelope``). The device
+    description's ``limits.plant_uncertainty`` gives the tolerance of a device
+    (:meth:`from_limits`)."""
+
+    gain: float = 0.15
+    phase_deg: float = 10.0
+    coupling: float = 0.05
+    samples: int = 12
+    seed: int = 0
+
+    def __post_init__(self):
+        for name in ("gain", "phase_deg", "coupling"):
+            v, top = getattr(self, name), (90.0 if name == "phase_deg" else 0.5)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v < top):
+                raise ConfigError(f"plant tolerance {name}: expected 0 <= value < {top:g}, got {v!r}")
+        if not (isinstance(self.samples, int) and 1 <= self.samples <= 64):
+            raise ConfigError(f"plant tolerance samples: expected 1..64, got {self.samples!r}")
+
+    def matrices(self) -> np.ndarray:
+        """The drawn actuator error matrices M, (samples, 6, 6) complex."""
+        rng = np.random.default_rng(self.seed)
+        out = np.empty((self.samples, 6, 6), complex)
+        for s in range(self.samples):
+            # Uniform within the tolerance, as the simulated device draws its own (corner draws cost a
+            # further 20 % of amplitude for the last 2 % of plants: their corrections are scaled a little).
+            g = 1.0 + self.gain * rng.uniform(-1.0, 1.0, 6)
+            ph = np.deg2rad(self.phase_deg) * rng.uniform(-1.0, 1.0, 6)
+            c = rng.uniform(-self.coupling, self.coupling, (6, 6))
+            np.fill_diagonal(c, 0.0)
+            out[s] = np.diag(g * np.exp(1j * ph)) @ (np.eye(6) + c)
+        return out
+
+
+    @classmethod
+    def from_limits(cls, limits) -> PlantTolerance:
+        """The device description's ``limits.plant_uncertainty`` (gain, phase deg, coupling)."""
+        gain, phase_deg, coupling = limits.plant_uncertainty
+        return cls(float(gain), float(phase_deg), float(coupling))
+
+    def describe(self) -> str:
+        """One line for messages: 'gain +-15 %, phase +-10 deg, coupling +-5 %'."""
+        return (f"gain +-{100 * self.gain:g} %, phase +-{self.phase_deg:g} deg, "
+                f"coupling +-{100 * self.coupling:g} %")
+
+    def is_zero(self) -> bool:
+        return self.gain == 0 and self.phase_deg == 0 and self.coupling == 0
+
+    def factor_hull(self, segments: int = 4) -> np.ndarray:
+        """Complex points whose convex hull contains every per-actuator factor ``g e^{i phi}`` within
+        the tolerance: the outer arc's points, the corners of the polygon circumscribing it
+        (``segments`` pieces) and the two inner corners. Every real quantity linear in ``M`` takes its
+        largest value over the tolerance at one of them (:func:`worst_over_plants`)."""
+        gmax, gmin, top = 1.0 + self.gain, 1.0 - self.gain, math.radians(self.phase_deg)
+        if top == 0.0:
+            return np.array([gmax, gmin], dtype=complex)
+        phi = np.linspace(-top, top, segments + 1)
+        half = 0.5 * (phi[1] - phi[0])
+        outer = gmax * np.exp(1j * phi)
+        tangents = gmax / math.cos(half) * np.exp(1j * (phi[:-1] + half))
+        inner = gmin * np.exp(1j * np.array([-top, top]))
+        return np.concatenate([outer, tangents, inner])
+
+
+def worst_over_plants(W: np.ndarray, tolerance: PlantTolerance) -> tuple[np.ndarray, np.ndarray]:
+    """The largest and the smallest value over every plant within ``tolerance`` of real quantities
+    linear in the drive matrix ``M``: ``y = sum_lm Re(M_lm W_lm)``, ``W`` (..., 6, 6) complex.
+
+    With ``M = diag(u) (1 + C)`` row ``l`` contributes ``Re(u_l W_ll) + sum_m C_lm Re(u_l W_lm)``; rows
+    are independent, each coupling entry takes the sign that helps (``+-coupling``), and a convex
+    function of ``u_l`` is largest at a vertex of :meth:`PlantTolerance.factor_hull`. So the result is
+    exact up to the hull (a bound at most 1e-3 relative above the true worst: 1 / cos 2.5 deg). Returns (max y, -min y),
+    each of shape ``W.shape[:-2]``."""
+    W = np.asarray(W, dtype=complex)
+    shape = W.shape[:-2] + (6,)
+    up = np.full(shape, -np.inf)
+    down = np.full(shape, -np.inf)
+    re, im = W.real, W.imag
+    for u in tolerance.factor_hull():
+        R = u.real * re - u.imag * im      # Re(u W)
+        d = np.diagonal(R, axis1=-2, axis2=-1)
+        off = tolerance.coupling * (np.add.reduce(np.abs(R), axis=-1) - np.abs(d))
+        np.maximum(up, d + off, out=up)
+        np.maximum(down, off - d, out=down)
+    return up.sum(axis=-1), down.sum(axis=-1)
+
+
+#: The limits a goal keeps for every plant within the device's ``limits.plant_uncertainty``
+#: (:meth:`Envelope.check_table` with an allowance): the instantaneous limits of the drive, which a
+#: plant stronger than the model passes on the goal's first ramp-up, before the feedback has
+#: measured it, and which the device protects itself from (its stopping faults). Not among them:
+#: the coil temperature (a steady-state I^2 R estimate; the coils' time constant is 300 s and the
+#: feedback measures the plant within about 1-2 s, after which the coils carry the nominal
+#: feed-forward's currents) and the plate-side limits (the plate's motion, which the feedback
+#: measures and corrects; docs/device.md, "Planning and limits").
+DRIVE_LIMITS = (
+    "limits.leg_stroke_m",
+    "limits.coil_current_a",
+    "limits.amplifier_voltage_v",
+)
 
 
 class Envelope:
@@ -294,10 +417,16 @@ class Envelope:
         return np.array([kk not in bad for kk in range(1, n_rows + 1)], dtype=bool)
 
     # ------------------------------------------------------------------ checks
-    def check_table(self, frequency_hz: float, currents: np.ndarray) -> EnvelopeReport:
+    def check_table(self, frequency_hz: float, currents: np.ndarray,
+                    allowance: PlantTolerance | None = None) -> EnvelopeReport:
         """The envelope of a dense current table (K, 6) (A, row k-1 = harmonic k) at ``frequency_hz``.
 
-        The plate motion, leg displacements and voltages are the nominal plant's prediction.
+        The plate motion, leg displacements and voltages are the nominal plant's prediction. With
+        ``allowance`` (a table played on a plant not measured yet: a goal's), the limits of the drive
+        (:data:`DRIVE_LIMITS`: leg stroke, peak coil current, amplifier voltage; the plant plays
+        ``M I``) are the worst over the nominal plant and every plant within the allowance
+        (:meth:`plant_worst`), and the report names the allowance (``allowance``, ``plant_bound``:
+        the limits where a plant within it is worse than the nominal one, ``nominal_ratios``).
         """
         f = float(frequency_hz)
         if not (math.isfinite(f) and f > 0):
@@ -330,7 +459,92 @@ class Envelope:
         self._peak("limits.leg_stroke_m", legs, values, ratios, worst)
         self._actuators(I, table_peak(I, k), table_peak(out["voltage"], k), values, ratios, worst)
         forbidden = tuple(kk for kk, _, _ in self.forbidden(f, rows))
-        return EnvelopeReport(f, values, ratios, self._limits(), forbidden, worst)
+        if allowance is None or allowance.is_zero():
+            return EnvelopeReport(f, values, ratios, self._limits(), forbidden, worst)
+        nominal = dict(ratios)
+        peaks = self.plant_worst(f, I, allowance, legs_linear, legs_exact)
+        r_values: dict[str, float] = {}
+        r_ratios: dict[str, float] = {}
+        r_worst: dict[str, int] = {}
+        self._peak("limits.leg_stroke_m", peaks["leg"], r_values, r_ratios, r_worst)
+        self._peak("limits.coil_current_a", peaks["current"], r_values, r_ratios, r_worst)
+        self._peak("limits.amplifier_voltage_v", peaks["voltage"], r_values, r_ratios, r_worst)
+        bound = frozenset(name for name in DRIVE_LIMITS if r_ratios[name] > ratios[name])
+        for name in bound:
+            values[name], ratios[name], worst[name] = r_values[name], r_ratios[name], r_worst[name]
+        return EnvelopeReport(f, values, ratios, self._limits(), forbidden, worst, allowance, nominal, bound)
+
+    def plant_worst(self, frequency_hz: float, currents: np.ndarray, allowance: PlantTolerance,
+                    legs_linear: np.ndarray | None = None,
+                    legs_exact: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Bounds over every plant within ``allowance`` of a table's actuator-side quantities (the
+        :data:`DRIVE_LIMITS`): the plant plays the drive ``M I`` through the nominal model
+        (:func:`worst_over_plants`).
+
+        Returns {"leg": peak leg displacement, "current": peak coil current, "voltage": peak amplifier
+        voltage}, each (6,). The legs' second-order terms (the
+        exact inverse kinematics' excess over the linear legs given in ``legs_exact`` and
+        ``legs_linear``: 0.1 % of LineSinkX's stroke) are the nominal plant's, grown with the square of
+        the worst linear amplitude."""
+        f = float(frequency_hz)
+        I = np.asarray(currents, dtype=complex)
+        rows = np.flatnonzero(np.any(I != 0, axis=1))
+        if rows.size == 0:
+            return dict.fromkeys(("leg", "current", "voltage"), np.zeros(6))
+        k = rows + 1
+        Ik = I[rows]
+        resp = self.plant.responses(f * k.astype(float), ("leg", "voltage"))
+        eye = np.broadcast_to(np.eye(6, dtype=complex), resp["leg"].shape)
+        H = np.concatenate([eye, resp["leg"], resp["voltage"]], axis=1)          # (K, 18, 6)
+
+        def fn(theta):
+            # y_o(theta) = Im sum_k (H_k M I_k)_o e^{i k theta} = sum_lm Re(M_lm W_olm)
+            E = np.exp(1j * np.outer(theta, k))                                  # (n, K)
+            up, down = worst_over_plants(-1j * np.einsum("tk,kol,km->tolm", E, H, Ik), allowance)
+            return np.maximum(up, down)
+
+        peaks = refined_max(fn, PEAK_SAMPLES_PER_PERIOD * int(k.max()))
+        legs = peaks[6:12]
+        if legs_linear is not None and legs_exact is not None:
+            excess = np.maximum(np.asarray(legs_exact) - legs_linear, 0.0)
+            grow = np.divide(legs, legs_linear, out=np.ones(6), where=np.asarray(legs_linear) > 0)
+            legs = legs + excess * grow**2
+        return {"leg": legs, "current": peaks[:6], "voltage": peaks[12:18]}
+
+    def drive_ratio(self, motion: PlateMotion, allowance: PlantTolerance, enough: float = 1.0,
+                    nominal: EnvelopeReport | None = None) -> float:
+        """The largest ratio of the :data:`DRIVE_LIMITS` of ``motion``'s nominal feed-forward table over
+        every plant within ``allowance`` (:meth:`check_table` with it), for a planner that must stay
+        within what the generator accepts. When a quick bound is at most ``enough``, that bound is
+        returned instead (an upper bound; the checker's own value is computed only above it): the
+        nominal peak (``nominal``: the motion's :meth:`check_motion` report, computed if not given)
+        plus the triangle inequality's bound of what ``M - 1`` adds, the stroke with 3 % more for the
+        growth of the legs' second-order terms (0.5 % of the stroke's first harmonic at 65 % of it)."""
+        active = motion.pruned()
+        if active.is_zero():
+            return 0.0
+        f = float(active.frequency_hz)
+        I = self.plant.feedforward(active, int(active.k.max()))
+        if nominal is None:
+            nominal = self.check_motion(active)
+        rows = np.flatnonzero(np.any(I != 0, axis=1))
+        resp = self.plant.responses(f * (rows + 1.0), ("leg", "voltage"))
+        A = np.abs(I[rows])                                                      # (K, 6)
+        # |((M - 1) I)_l| <= |u_l - 1| |I_l| + |u_l| coupling sum_{m != l} |I_m|, harmonic by harmonic.
+        hull = allowance.factor_hull()
+        dI = (float(np.max(np.abs(hull - 1.0))) * A
+              + float(np.max(np.abs(hull))) * allowance.coupling * (A.sum(axis=1, keepdims=True) - A))
+        lim, v = self.config.limits, nominal.values
+        quick = max((v["limits.coil_current_a"] + float(np.max(dI.sum(axis=0)))) / lim.coil_current_a,
+                    1.03 * (v["limits.leg_stroke_m"] + float(np.max(np.einsum("kol,kl->o", np.abs(resp["leg"]), dI))))
+                    / lim.leg_stroke_m,
+                    (v["limits.amplifier_voltage_v"]
+                     + float(np.max(np.einsum("kol,kl->o", np.abs(resp["voltage"]), dI))))
+                    / lim.amplifier_voltage_v)
+        if quick <= enough:
+            return quick
+        report = self.check_table(f, I, allowance)
+        return max(report.ratios[name] for name in DRIVE_LIMITS)
 
     def check_motion(self, motion: PlateMotion, currents: np.ndarray | None = None) -> EnvelopeReport:
         """The envelope of a plate motion: its own peaks, margin and exact stroke, and its table's
@@ -475,11 +689,14 @@ class Envelope:
 
 __all__ = [
     "LIMIT_ORDER",
+    "DRIVE_LIMITS",
     "PLATE_LIMITS",
     "Envelope",
     "EnvelopeReport",
     "motion_extremes",
     "motion_extremes_many",
+    "PlantTolerance",
     "refined_max",
+    "worst_over_plants",
     "table_peak",
 ]

@@ -11,7 +11,13 @@ naming the first limit it would exceed (DESIGN.md, device safety). Checks, in or
 4. ``limits.contact_margin_mps2``: min over the working disc and the cycle of g + a_n;
 5. ``limits.leg_stroke_m``: peak leg displacement from the exact inverse kinematics;
 6. ``limits.coil_current_a``, ``limits.coil_temperature_c`` (steady-state I^2 R heating) and
-   ``limits.amplifier_voltage_v``: from the table through the nominal plant.
+   ``limits.amplifier_voltage_v``: from the table through the nominal plant;
+7. the drive limits (:data:`~ppod_ros.actuation.envelope.DRIVE_LIMITS`: leg stroke, peak coil
+   current, amplifier voltage) for every plant within ``limits.plant_uncertainty``: a goal's table
+   plays on a plant the feedback has not measured for it yet (its starting correction may come late,
+   be lost or be scaled back), and a plant stronger than the model would take a goal planned near a
+   limit past it on the first ramp-up (the checker's bound, ``Envelope.check_table`` with an
+   allowance). The rejection names the limit and the allowance.
 
 Invalid goals (NaN, frequency <= 0, harmonic numbers outside 1..10) never become a PlateMotion:
 its constructor raises :class:`~ppod_ros.errors.ConfigError` naming the field.
@@ -28,7 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ppod_ros.actuation.envelope import Envelope, EnvelopeReport, motion_extremes, table_peak
+from ppod_ros.actuation.envelope import Envelope, EnvelopeReport, PlantTolerance, motion_extremes, table_peak
 from ppod_ros.actuation.harmonics import rms
 from ppod_ros.actuation.plant import NominalPlant
 from ppod_ros.can.protocol import MAX_RAMP_S, quantise_currents, quantise_frequency
@@ -164,6 +170,10 @@ class GoalPlanner:
         self.kinematics = self.plant.kinematics
         #: The one envelope checker (ppod_ros.actuation.envelope) every corrected table passes.
         self.envelope = Envelope(config, self.plant)
+        #: The plants a goal's table must be safe on before the feedback has measured the plant
+        #: (``limits.plant_uncertainty``; None when it is zero: the nominal plant alone).
+        tolerance = PlantTolerance.from_limits(config.limits)
+        self.allowance: PlantTolerance | None = None if tolerance.is_zero() else tolerance
         self._plan_envelope: tuple[GoalPlan, EnvelopeReport] | None = None
 
     # ------------------------------------------------------------------ goals
@@ -278,6 +288,11 @@ class GoalPlanner:
         if linear > lim.leg_stroke_m:
             raise _limit("limits.leg_stroke_m", lim.leg_stroke_m, linear, "peak leg displacement (linear model)", "m")
         self.check_table(prediction)
+        if top and self.allowance is not None:
+            # The drive limits on every plant within the allowance (item 7 of the module docstring).
+            error = self.envelope.check_table(freq, currents, self.allowance).error()
+            if error is not None:
+                raise error
         ramp = motion.ramp_time_s if motion.ramp_time_s is not None else self.config.timing.default_ramp_s
         # A change of motion faster than min_goal_ramp_s rings the flexures: the legs overshoot their
         # steady stroke (simulated device, a spin at 61 % of the stroke: +37 % from rest and +80 %

@@ -29,6 +29,7 @@ from ppod_ros.device.schema import (
     MAX_SUMMARY_CYCLES,
     MAX_WATCHDOG_CHECK_S,
     MAX_WATCHDOG_RAMP_S,
+    MIN_STOP_RAMP_S,
     NUM_ACTUATORS,
     Accelerometers,
     ActuatorParams,
@@ -164,12 +165,38 @@ def _limits(f: Fields, plate_radius_m: float, ambient_c: float) -> Limits:
         start_correction_a=f.number("start_correction_a", 1.0, min_value=0.0, exclusive_min=True, unit="A"),
         max_table_harmonic=f.integer("max_table_harmonic", MAX_HARMONIC, min_value=1, max_value=MAX_HARMONIC),
         plant_model_allowance=f.number("plant_model_allowance", 0.25, min_value=0.0, max_value=1.0, unit="1"),
+        plant_uncertainty=_plant_uncertainty(f),
     )
     if out.max_table_harmonic < out.max_harmonic:
         raise ConfigError(f"{f.key_path('max_table_harmonic')}: must be >= max_harmonic ({out.max_harmonic}), "
                           f"got {out.max_table_harmonic}")
     f.finish()
     return out
+
+
+def _plant_uncertainty(f: Fields) -> tuple[float, float, float]:
+    """``limits.plant_uncertainty``: {gain, phase_deg, coupling}, each optional (defaults 0.15, 10, 0.05)."""
+    u = f.sub("plant_uncertainty", {})
+    if u is None:
+        u = Fields({}, f.key_path("plant_uncertainty"))
+    out = (
+        u.number("gain", 0.15, min_value=0.0, max_value=0.49, unit="1"),
+        u.number("phase_deg", 10.0, min_value=0.0, max_value=60.0, unit="deg"),
+        u.number("coupling", 0.05, min_value=0.0, max_value=0.49, unit="1"),
+    )
+    u.finish()
+    return out
+
+
+def _stop_ramp(f: Fields, key: str) -> float:
+    """A stop ramp (``timing.estop_ramp_s``, ``timing.watchdog_ramp_s``): exactly the design's 0.1 s."""
+    value = f.number(key, unit="s")
+    if not MIN_STOP_RAMP_S - 1e-12 <= value <= MAX_WATCHDOG_RAMP_S + 1e-12:
+        raise ConfigError(
+            f"{f.key_path(key)}: must be {MIN_STOP_RAMP_S:g} s (a faster stop rings the flexures past the leg "
+            f"stroke: 50 ms 1.036x, 20 ms 1.46x; DESIGN.md allows at most {MAX_WATCHDOG_RAMP_S:g} s), got {value:g}"
+        )
+    return value
 
 
 def _can_options(f: Fields) -> tuple[tuple[str, Any], ...]:
@@ -218,8 +245,8 @@ def _timing(f: Fields, heartbeat_period_s: float) -> DeviceTiming:
         watchdog_check_s=f.number(
             "watchdog_check_s", min_value=1e-4, max_value=MAX_WATCHDOG_CHECK_S, unit="s"
         ),
-        watchdog_ramp_s=f.number("watchdog_ramp_s", min_value=1e-3, max_value=MAX_WATCHDOG_RAMP_S, unit="s"),
-        estop_ramp_s=f.number("estop_ramp_s", min_value=1e-3, max_value=MAX_WATCHDOG_RAMP_S, unit="s"),
+        watchdog_ramp_s=_stop_ramp(f, "watchdog_ramp_s"),
+        estop_ramp_s=_stop_ramp(f, "estop_ramp_s"),
         default_ramp_s=_positive(f, "default_ramp_s", "s"),
         min_ramp_s=f.number("min_ramp_s", min_value=1e-3, unit="s"),
         min_goal_ramp_s=f.number("min_goal_ramp_s", 0.2, min_value=1e-3, unit="s"),

@@ -22,6 +22,11 @@ MAX_SUMMARY_CYCLES = 16
 #: DESIGN.md, device safety: heartbeat checked at least every 10 ms, ramp to zero within 100 ms.
 MAX_WATCHDOG_CHECK_S = 0.010
 MAX_WATCHDOG_RAMP_S = 0.100
+#: The shortest stop ramp (e-stop, watchdog, stopping fault): a faster stop rings the lightly damped
+#: flexures past the steady leg excursion (simulated device, spins at 67-96 % of the stroke, 19-40 Hz:
+#: 10 ms 1.75x, 20 ms 1.46x, 50 ms 1.036x, 100 ms 1.010x; docs/device.md, "Stops"): only the
+#: design's longest ramp keeps a motion near the stroke within it.
+MIN_STOP_RAMP_S = 0.100
 
 
 def frozen_array(arr: np.ndarray) -> np.ndarray:
@@ -97,7 +102,11 @@ class Limits:
     sends as the goal ramps in: learned for this goal before, or predicted by the learned plant);
     ``plant_model_allowance`` (fraction) is how far the nominal plant's prediction of a corrected
     table's plate-side limits may exceed them when the table is judged on the measured plate motion
-    (docs/device.md, "Planning and limits"; 0: judged through the nominal plant alone).
+    (docs/device.md, "Planning and limits"; 0: judged through the nominal plant alone);
+    ``plant_uncertainty`` (gain fraction, phase deg, coupling fraction) bounds how far the real
+    plant's drive may differ from the nominal model before the feedback has measured it: a goal's
+    table must keep every plant-dependent limit for every plant within it (docs/device.md,
+    "Planning and limits").
     """
 
     leg_stroke_m: float
@@ -115,6 +124,7 @@ class Limits:
     start_correction_a: float = 1.0
     max_table_harmonic: int = 10
     plant_model_allowance: float = 0.25
+    plant_uncertainty: tuple[float, float, float] = (0.15, 10.0, 0.05)
 
 
 @dataclass(frozen=True)

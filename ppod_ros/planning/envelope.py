@@ -25,16 +25,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 
+from ppod_ros.actuation.envelope import PlantTolerance
 from ppod_ros.errors import ConfigError, LimitError
 from ppod_ros.motion import PlateMotion
 
 #: Shrink factor per retry when a scaled motion still lands a hair over (refined extrema, rounding).
 RETRY_STEP = 0.98
+#: The drive limits' largest ratio over the plants within ``limits.plant_uncertainty`` a fitted motion
+#: may use (the generator accepts 1; the table's quantisation and rows change it by far less).
+DRIVE_FIT = 0.999
 
 
 @lru_cache(maxsize=8)
@@ -42,41 +45,6 @@ def _envelope(device):
     from ppod_ros.actuation.envelope import Envelope
 
     return Envelope(device)
-
-
-@dataclass(frozen=True)
-class PlantTolerance:
-    """Actuator errors the planner leaves room for: per actuator a gain error up to ``gain``
-    (fraction) and a phase error up to ``phase_deg``, and cross-coupling up to ``coupling``
-    (fraction), as ``samples`` fixed draws (``seed``) of ``M = diag(g e^{i phi}) (1 + C)``."""
-
-    gain: float = 0.15
-    phase_deg: float = 10.0
-    coupling: float = 0.05
-    samples: int = 12
-    seed: int = 0
-
-    def __post_init__(self):
-        for name in ("gain", "phase_deg", "coupling"):
-            v, top = getattr(self, name), (90.0 if name == "phase_deg" else 0.5)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v < top):
-                raise ConfigError(f"plant tolerance {name}: expected 0 <= value < {top:g}, got {v!r}")
-        if not (isinstance(self.samples, int) and 1 <= self.samples <= 64):
-            raise ConfigError(f"plant tolerance samples: expected 1..64, got {self.samples!r}")
-
-    def matrices(self) -> np.ndarray:
-        """The drawn actuator error matrices M, (samples, 6, 6) complex."""
-        rng = np.random.default_rng(self.seed)
-        out = np.empty((self.samples, 6, 6), complex)
-        for s in range(self.samples):
-            # Uniform within the tolerance, as the simulated device draws its own (corner draws cost a
-            # further 20 % of amplitude for the last 2 % of plants: their corrections are scaled a little).
-            g = 1.0 + self.gain * rng.uniform(-1.0, 1.0, 6)
-            ph = np.deg2rad(self.phase_deg) * rng.uniform(-1.0, 1.0, 6)
-            c = rng.uniform(-self.coupling, self.coupling, (6, 6))
-            np.fill_diagonal(c, 0.0)
-            out[s] = np.diag(g * np.exp(1j * ph)) @ (np.eye(6) + c)
-        return out
 
 
 @lru_cache(maxsize=64)
@@ -175,9 +143,19 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
     robust = ([0.0] * len(todo) if tolerance is None else
               [max(corrected_motion_ratios(motions[i], device, tolerance).values()) / (1.0 + allowance)
                for i in todo])
+    # The generator accepts a goal only if its drive limits hold on every plant within the device's
+    # limits.plant_uncertainty (GoalPlanner.plan): that allowance is the goal's room for the plant,
+    # so these limits are kept at DRIVE_FIT (read as max_ratio), not with the headroom on top.
+    unmeasured = PlantTolerance.from_limits(device.limits)
+
+    def drive(motion: PlateMotion, report) -> float:
+        if unmeasured.is_zero():
+            return 0.0
+        return envelope.drive_ratio(motion, unmeasured, DRIVE_FIT, report) / DRIVE_FIT
+
     pending = []
     for i, report, rob in zip(todo, reports, robust):
-        worst = max(report.worst()[1], rob)
+        worst = max(report.worst()[1], rob, drive(motions[i], report) * max_ratio)
         if worst <= max_ratio:
             out[i] = (motions[i], 1.0)   # within as it is: the checker's report above is its own
         else:
@@ -189,7 +167,7 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
         candidates = [motions[i].scaled(scale) for i, scale in pending]
         still = []
         for (i, scale), candidate, report in zip(pending, candidates, envelope.check_motions(candidates)):
-            if report.within(max_ratio):
+            if report.within(max_ratio) and drive(candidate, report) <= 1.0:
                 out[i] = (candidate, scale)
             else:
                 last[i] = report
@@ -198,7 +176,9 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
     if not pending:
         return out  # type: ignore[return-value]
     i, scale = pending[0]
-    err = last[i].error(max_ratio)
+    err = last[i].error(max_ratio) or LimitError(
+        f"the drive limits on a plant within limits.plant_uncertainty ({unmeasured.describe()})",
+        limit="limits.leg_stroke_m", limit_value=math.nan, requested=math.nan)
     raise LimitError(f"motion: not within the device envelope with {100 * headroom:.0f} % headroom even at "
                      f"{100 * scale:.1f} % amplitude ({err})", limit=err.limit, limit_value=err.limit_value,
                      requested=err.requested)

@@ -154,8 +154,10 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
         return envelope.drive_ratio(motion, unmeasured, DRIVE_FIT, report) / DRIVE_FIT
 
     pending = []
+    drives = {}
     for i, report, rob in zip(todo, reports, robust):
-        worst = max(report.worst()[1], rob, drive(motions[i], report) * max_ratio)
+        drives[i] = drive(motions[i], report)
+        worst = max(report.worst()[1], rob, drives[i] * max_ratio)
         if worst <= max_ratio:
             out[i] = (motions[i], 1.0)   # within as it is: the checker's report above is its own
         else:
@@ -167,7 +169,9 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
         candidates = [motions[i].scaled(scale) for i, scale in pending]
         still = []
         for (i, scale), candidate, report in zip(pending, candidates, envelope.check_motions(candidates)):
-            if report.within(max_ratio) and drive(candidate, report) <= 1.0:
+            # The drive limits are linear in the scale but for the legs' second-order terms, which
+            # shrink faster: scale times the unscaled ratio bounds the scaled one (no second exact check).
+            if report.within(max_ratio) and (scale * drives[i] <= 1.0 or drive(candidate, report) <= 1.0):
                 out[i] = (candidate, scale)
             else:
                 last[i] = report

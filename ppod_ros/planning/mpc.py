@@ -182,14 +182,14 @@ class MpcSettings:
                                           # the stick-slip rows of the bracket that hit 1500 steps cost 10-130 ms
                                           # each and made the replanning time's tail (docs/planner.md). 0: no budget
     budget_fitted: bool = False           # the best candidates fitted into the envelope on that budget too
-    gave_up_max_steps_per_period: int = 800  # a fitted candidate (template kind and goal) the solver gave up on
-    gave_up_max_periods: int = 12         # at PLANNER_SOLVER's caps is solved on this budget while each part
-    gave_up_near_m: float = 0.01          # it gave up at is within this distance and hold_gave_up_rad of its
-                                          # pose there (not re-recorded on the budget; converged or contact
-                                          # lost: forgotten). Four parts: such a candidate gave up again in 176
-                                          # of 196 steps, 40-110 ms each, the replanning time's tail; at 200 or
-                                          # 400 steps per period three-part scene 0 timed out (rows converging
-                                          # at 400-800 were ruled out), at 800 not (docs/planner.md). 0: off
+    gave_up_max_steps_per_period: int = 0  # an option, off (measured with 800, 12, 0.01): a fitted candidate
+    gave_up_max_periods: int = 0          # (template kind and goal) the solver gave up on at PLANNER_SOLVER's
+    gave_up_near_m: float = 0.01          # caps is solved on this budget while each part it gave up at is
+                                          # within gave_up_near_m and hold_gave_up_rad of its pose there (not
+                                          # re-recorded on the budget; converged or contact lost: forgotten).
+                                          # Four parts: replanning thread CPU p95 158 -> 145 ms, 4/10 both; three
+                                          # parts 19/20 -> 18/20 (six scenes changed); at 200 or 400 steps three-
+                                          # part scene 0 timed out (docs/planner.md). 0 and 0: off
     rest_dwell_s: float | None = 0.5     # from the plate at rest (a part out again after the stop: the ramp down
                                           # carried a bracket stopped 0.86 mm from its goal back to 1.2 mm), the
                                           # next motion may start this long after the stop (the ramp's end)
@@ -1013,6 +1013,9 @@ class MultiTask:
         """After solving fitted candidates: remember where the solver gave up on one at full caps (a row
         given up on within the budget is not re-recorded, so the budget cannot follow the part along its
         path), forget one that converged or lost contact."""
+        s = self.settings
+        if not (s.gave_up_max_steps_per_period or s.gave_up_max_periods):
+            return
         for m in motions:
             hit = self._memo.get(m.key)
             if hit is None or m.is_zero():

@@ -916,7 +916,7 @@ class MultiTask:
         if order:
             fitted = self._fitted_many([pool[i] for i in order])
             fitted_costs, _ = self._costs(fitted, poses, statuses,
-                                          budget=s.budget_fitted or self._suspects(fitted, poses))
+                                          budget=s.budget_fitted or self._suspects(fitted, poses) or False)
             self._note_gave_up(fitted, poses)
             if unlearned:
                 fitted_costs = fitted_costs + self._first_error_costs(fitted, poses, statuses)

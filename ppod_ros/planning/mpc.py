@@ -203,6 +203,14 @@ class MpcSettings:
                                           # the stick-slip rows of the bracket that hit 1500 steps cost 10-130 ms
                                           # each and made the replanning time's tail (docs/planner.md). 0: no budget
     budget_fitted: bool = False           # the best candidates fitted into the envelope on that budget too
+    gave_up_max_steps_per_period: int = 0  # an option, off (measured with 800, 12, 0.01): a fitted candidate
+    gave_up_max_periods: int = 0          # (template kind and goal) the solver gave up on at PLANNER_SOLVER's
+    gave_up_near_m: float = 0.01          # caps is solved on this budget while each part it gave up at is
+                                          # within gave_up_near_m and hold_gave_up_rad of its pose there (not
+                                          # re-recorded on the budget; converged or contact lost: forgotten).
+                                          # Four parts: replanning thread CPU p95 158 -> 145 ms, 4/10 both; three
+                                          # parts 19/20 -> 18/20 (six scenes changed); at 200 or 400 steps three-
+                                          # part scene 0 timed out (docs/planner.md). 0 and 0: off
     rest_dwell_s: float | None = 0.5     # from the plate at rest (a part out again after the stop: the ramp down
                                           # carried a bracket stopped 0.86 mm from its goal back to 1.2 mm), the
                                           # next motion may start this long after the stop (the ramp's end)
@@ -245,11 +253,12 @@ class MpcSettings:
             raise ConfigError(f"harmonics: expected 1 or 2, got {self.harmonics!r}")
         if not 0.0 <= self.headroom < 0.5:
             raise ConfigError(f"headroom: expected 0..0.5 (fraction), got {self.headroom!r}")
-        for name in ("probe_max_steps_per_period", "probe_max_periods"):
+        for name in ("probe_max_steps_per_period", "probe_max_periods", "gave_up_max_steps_per_period",
+                     "gave_up_max_periods"):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 0):
                 raise ConfigError(f"{name}: expected an integer >= 0 (0: no budget), got {v!r}")
-        for name in ("hold_gave_up_m", "hold_gave_up_rad"):
+        for name in ("hold_gave_up_m", "hold_gave_up_rad", "gave_up_near_m"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"{name}: must be >= 0 (0: off), got {v!r}")
@@ -646,6 +655,10 @@ class MultiTask:
         self.held_predictions = 0          # replanning steps that held the motion playing's last prediction
         self._fits: dict[bytes, PlateMotion] = {}
         self._memo_poses: bytes | None = None
+        self._gave_up_at: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # fitted candidate's name: (the commanded
+                                          # rows it gave up at, their poses) where the solver last gave up on it
+                                          # at full caps
+        self._rows_gave_up: dict[bytes, np.ndarray] = {}  # this step's motions: the commanded rows given up on
         # Per unlearned motion (see MpcSettings.unlearned_motions): the fraction (G, 3) of the model
         # velocity the uncorrected plants play on average, and the time of its switch.
         self._first_error: dict[bytes, tuple[np.ndarray, float]] = {}
@@ -933,7 +946,9 @@ class MultiTask:
             or any(not self.state[g.index].estimated for g in self.goals))
         if order:
             fitted = self._fitted_many([pool[i] for i in order])
-            fitted_costs, _ = self._costs(fitted, poses, statuses, budget=s.budget_fitted)
+            fitted_costs, _ = self._costs(fitted, poses, statuses,
+                                          budget=s.budget_fitted or self._suspects(fitted, poses) or False)
+            self._note_gave_up(fitted, poses)
             if unlearned:
                 fitted_costs = fitted_costs + self._first_error_costs(fitted, poses, statuses)
                 costs[[i for i in range(1, len(costs)) if i not in order]] = np.inf
@@ -1003,6 +1018,44 @@ class MultiTask:
             self._memo[key] = (v, True, False, False)
             self._held_at = self._memo_poses
             self.held_predictions += 1
+
+    def _suspects(self, motions: Sequence[PlateMotion], poses: np.ndarray) -> frozenset:
+        """The keys of ``motions`` to solve on the give-up budget (``gave_up_max_steps_per_period``): those
+        whose name the solver gave up on at full caps, each part it gave up at within ``gave_up_near_m`` /
+        ``hold_gave_up_rad`` of its pose then."""
+        s = self.settings
+        if not (s.gave_up_max_steps_per_period or s.gave_up_max_periods) or not self._gave_up_at:
+            return frozenset()
+        cmd = np.array([poses[g.index] for g in self.goals])
+        oriented = np.array([g.theta_rad is not None for g in self.goals])
+        out = set()
+        for m in motions:
+            hit = self._gave_up_at.get(m.name)
+            if hit is None:
+                continue
+            rows, at = hit
+            d = np.nan_to_num(np.hypot(*(cmd[rows, :2] - at[:, :2]).T), nan=np.inf)
+            turn = np.where(oriented[rows], np.nan_to_num(np.abs(_wrap(cmd[rows, 2] - at[:, 2])), nan=np.inf), 0.0)
+            if np.all(d <= s.gave_up_near_m) and np.all(turn <= s.hold_gave_up_rad):
+                out.add(m.key)
+        return frozenset(out)
+
+    def _note_gave_up(self, motions: Sequence[PlateMotion], poses: np.ndarray) -> None:
+        """After solving fitted candidates: remember where the solver gave up on one at full caps (a row
+        given up on within the budget is not re-recorded, so the budget cannot follow the part along its
+        path), forget one that converged or lost contact."""
+        s = self.settings
+        if not (s.gave_up_max_steps_per_period or s.gave_up_max_periods):
+            return
+        for m in motions:
+            hit = self._memo.get(m.key)
+            if hit is None or m.is_zero():
+                continue
+            rows = self._rows_gave_up.get(m.key)
+            if hit[3] and not hit[2] and rows is not None and rows.any():
+                self._gave_up_at[m.name] = (rows, np.array([poses[g.index] for g in self.goals])[rows])
+            elif not hit[3]:
+                self._gave_up_at.pop(m.name, None)
 
     def _remember_playing(self, motion: PlateMotion, poses: np.ndarray) -> None:
         """The motion about to play, solved at these poses (not held): where it last converged."""
@@ -1335,47 +1388,62 @@ class MultiTask:
         """The solved rows' poses as the key of the per-step memo of model velocities."""
         return np.ascontiguousarray(poses[self._rows]).tobytes()
 
-    def _velocities(self, motions, poses, budget: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def _velocities(self, motions, poses, budget: bool | frozenset = False) -> tuple[np.ndarray, np.ndarray]:
         """Model velocities (M, R, 3) (NaN as 0) of the solved rows (the commanded parts in goal order,
         then the kept-clear others) and validity (M,) at the commanded parts: one batched solver call
-        per part model for the motions not yet solved at these poses. Unseen rows: velocity 0.
-        ``budget``: the motions not yet solved are solved on the probes' budget
-        (``MpcSettings.probe_max_periods``, ``probe_max_steps_per_period``); a motion solved within it
-        has the result it has without it, one not converged within it is solved again when asked
-        without a budget."""
-        G, rows = len(self.goals), self._rows
-        R = len(rows)
+        per part model (and budget) for the motions not yet solved at these poses. Unseen rows:
+        velocity 0. ``budget`` True: the motions not yet solved are solved on the probes' budget
+        (``MpcSettings.probe_max_periods``, ``probe_max_steps_per_period``); a set of motion keys: those
+        motions on the give-up budget (``gave_up_max_periods``, ``gave_up_max_steps_per_period``), the
+        others without. A motion solved within a budget has the result it has without it, one not
+        converged within it is solved again when asked without a budget."""
         pose_key = self._pose_key(poses)
         if pose_key != self._memo_poses:
-            self._memo, self._memo_poses = {}, pose_key
-        settings = self._probe_solver() if budget else None
+            self._memo, self._memo_poses, self._rows_gave_up = {}, pose_key, {}
+        keys = budget if isinstance(budget, frozenset) else frozenset()
+        probe = self._probe_solver() if budget is True else None
+        suspect = self._gave_up_solver() if keys else None
         new: dict[bytes, PlateMotion] = {}
         for motion in motions:
             hit = self._memo.get(motion.key)
-            if hit is None or (settings is None and hit[2] and not hit[1]):
+            budgeted_now = probe is not None or (suspect is not None and motion.key in keys)
+            if hit is None or (not budgeted_now and hit[2] and not hit[1]):
                 new.setdefault(motion.key, motion)
         if new:
-            todo = list(new.values())
-            v_new = np.zeros((len(todo), R, 3))
-            ok_new = np.ones(len(todo), bool)
-            lost_new = np.zeros(len(todo), bool)   # some commanded row invalid for another reason than giving up
-            for part, js in self._groups:
-                dim = _dim(part)
-                cfg = np.array([poses[rows[j], :dim] for j in js])
-                seen = np.all(np.isfinite(cfg[:, :2]), axis=1)
-                cfg[~seen] = 0.0
-                v, valid, gave_up = predict_velocities(todo, part, cfg, settings, gave_up=True)
-                v[:, ~seen] = 0.0
-                v_new[:, js, :dim] = v
-                commanded = np.array(js) < G
-                ok_new &= valid[:, commanded].all(axis=1)
-                lost_new |= (~valid[:, commanded] & ~gave_up[:, commanded]).any(axis=1)
-            v_new = np.nan_to_num(v_new)
-            for motion, v, o, lost in zip(todo, v_new, ok_new, lost_new):
-                self._memo[motion.key] = (v, bool(o), settings is not None, not o and not lost)
+            on = [m for m in new.values() if suspect is not None and m.key in keys]
+            off = [m for m in new.values() if not (suspect is not None and m.key in keys)]
+            for todo, settings in ((off, probe), (on, suspect)):
+                if todo:
+                    self._solve_rows(todo, poses, settings)
+        R = len(self._rows)
         vel = np.array([self._memo[m.key][0] for m in motions]).reshape(len(motions), R, 3)
         ok = np.array([self._memo[m.key][1] for m in motions], bool)
         return vel, ok
+
+    def _solve_rows(self, todo: list[PlateMotion], poses: np.ndarray, settings) -> None:
+        """Solve ``todo`` at the solved rows' poses (``settings`` None: PLANNER_SOLVER) into the memo."""
+        G, rows = len(self.goals), self._rows
+        R = len(rows)
+        v_new = np.zeros((len(todo), R, 3))
+        ok_new = np.ones(len(todo), bool)
+        lost_new = np.zeros(len(todo), bool)   # some commanded row invalid for another reason than giving up
+        rows_gave_up = np.zeros((len(todo), G), bool)
+        for part, js in self._groups:
+            dim = _dim(part)
+            cfg = np.array([poses[rows[j], :dim] for j in js])
+            seen = np.all(np.isfinite(cfg[:, :2]), axis=1)
+            cfg[~seen] = 0.0
+            v, valid, gave_up = predict_velocities(todo, part, cfg, settings, gave_up=True)
+            v[:, ~seen] = 0.0
+            v_new[:, js, :dim] = v
+            commanded = np.array(js) < G
+            ok_new &= valid[:, commanded].all(axis=1)
+            lost_new |= (~valid[:, commanded] & ~gave_up[:, commanded]).any(axis=1)
+            rows_gave_up[:, [j for j in js if j < G]] = gave_up[:, commanded]
+        v_new = np.nan_to_num(v_new)
+        for motion, v, o, lost, given_up in zip(todo, v_new, ok_new, lost_new, rows_gave_up):
+            self._memo[motion.key] = (v, bool(o), settings is not None, not o and not lost)
+            self._rows_gave_up[motion.key] = given_up
 
     def _probe_solver(self):
         """The solver settings of the Gauss-Newton probes and trials (None: PLANNER_SOLVER's)."""
@@ -1383,6 +1451,11 @@ class MultiTask:
         if not (s.probe_max_periods or s.probe_max_steps_per_period):
             return None
         return budgeted(s.probe_max_periods, s.probe_max_steps_per_period)
+
+    def _gave_up_solver(self):
+        """The solver settings of fitted candidates the solver gave up on nearby (``_suspects``)."""
+        s = self.settings
+        return budgeted(s.gave_up_max_periods, s.gave_up_max_steps_per_period)
 
     def _refine(self, start: PlateMotion, poses, statuses) -> tuple[PlateMotion | None, float]:
         """Gauss-Newton steps from ``start``: finite-difference probes and line-search trials solved on

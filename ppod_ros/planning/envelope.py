@@ -148,16 +148,21 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
     # so these limits are kept at DRIVE_FIT (read as max_ratio), not with the headroom on top.
     unmeasured = PlantTolerance.from_limits(device.limits)
 
-    def drive(motion: PlateMotion, report) -> float:
+    def drive(motion: PlateMotion, report, enough: float = 1.0) -> float:
+        """The drive limits' worst-plant ratio over DRIVE_FIT, or an upper bound of it when that is
+        at most ``enough`` (no exact check)."""
         if unmeasured.is_zero():
             return 0.0
-        return envelope.drive_ratio(motion, unmeasured, DRIVE_FIT, report) / DRIVE_FIT
+        return envelope.drive_ratio(motion, unmeasured, DRIVE_FIT * enough, report) / DRIVE_FIT
 
     pending = []
     drives = {}
     for i, report, rob in zip(todo, reports, robust):
-        drives[i] = drive(motions[i], report)
-        worst = max(report.worst()[1], rob, drives[i] * max_ratio)
+        other = max(report.worst()[1], rob)
+        # Exact only where it can decide: a bound at most max(other, max_ratio) leaves the motion
+        # accepted, or scaled by the other limits, exactly as the exact ratio would.
+        drives[i] = drive(motions[i], report, max(other, max_ratio) / max_ratio)
+        worst = max(other, drives[i] * max_ratio)
         if worst <= max_ratio:
             out[i] = (motions[i], 1.0)   # within as it is: the checker's report above is its own
         else:
@@ -170,7 +175,8 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
         still = []
         for (i, scale), candidate, report in zip(pending, candidates, envelope.check_motions(candidates)):
             # The drive limits are linear in the scale but for the legs' second-order terms, which
-            # shrink faster: scale times the unscaled ratio bounds the scaled one (no second exact check).
+            # shrink faster: scale times the unscaled ratio (or its bound) bounds the scaled one (no
+            # second exact check).
             if report.within(max_ratio) and (scale * drives[i] <= 1.0 or drive(candidate, report) <= 1.0):
                 out[i] = (candidate, scale)
             else:

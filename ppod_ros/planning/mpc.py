@@ -1280,9 +1280,9 @@ class MultiTask:
                     way[k] = self._held_waypoint(g, p)
                 weight[k] = s.hold_weight
             if self.focus is not None and g.index != self.focus and not tr.holding:
-                # Focus lowers the weight of the other unfinished parts, never of a held one: with
-                # it lowered, a motion that turned the focused bracket threw a washer off its goal
-                # at 13 mm/s (benchmark scene 7 of 3 parts).
+                # Focus lowers the weight of the other unfinished parts; of a held one only in the
+                # endgame (focus_held): far from the focused part's goal, a motion that turned the
+                # focused bracket threw a washer off its goal at 13 mm/s (benchmark scene 7 of 3 parts).
                 weight[k] *= s.focus_others
             if (tr.holding and self.focus is not None and g.index != self.focus and s.focus_held < 1.0
                     and self._focus_near(statuses)):

@@ -105,8 +105,8 @@ class Limits:
     (docs/device.md, "Planning and limits"; 0: judged through the nominal plant alone);
     ``plant_uncertainty`` (gain fraction, phase deg, coupling fraction) bounds how far the real
     plant's drive may differ from the nominal model before the feedback has measured it: a goal's
-    table must keep every plant-dependent limit for every plant within it (docs/device.md,
-    "Planning and limits").
+    table must keep the drive limits (leg stroke, peak coil current, amplifier voltage) for every
+    plant within it (docs/device.md, "Goals on a plant not measured yet").
     """
 
     leg_stroke_m: float

@@ -18,8 +18,7 @@ from ppod_ros.errors import ConfigError
 from ppod_ros.parts import PointPart, published_rigid_part
 from ppod_ros.planning import predict
 from ppod_ros.planning.mpc import MpcSettings, MultiTask, PartGoal, moved, spin_motion
-
-CODE = {text: code for code, text in physics.REASONS.items()}
+from tests.support.scripted_solver import CODE, solver_result
 
 
 class _Scripted:
@@ -38,13 +37,7 @@ class _Scripted:
                 self.caps.append(settings.max_steps_per_period)
                 if self.reason is not None:
                     valid[i], code[i], velocity[i] = False, CODE[self.reason], np.nan
-
-        class Result:
-            pass
-
-        r = Result()
-        r.velocity, r.valid, r.reason_code = velocity, valid, code
-        return r
+        return solver_result(velocity, valid, code)
 
 
 ON = MpcSettings(gave_up_max_steps_per_period=800, gave_up_max_periods=12)   # the values measured (an option)

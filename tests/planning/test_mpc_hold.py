@@ -18,8 +18,7 @@ from ppod_ros.motion import PlateMotion
 from ppod_ros.parts import PointPart, published_rigid_part
 from ppod_ros.planning import predict
 from ppod_ros.planning.mpc import MpcSettings, MultiTask, PartGoal, moved, spin_motion
-
-CODE = {text: code for code, text in physics.REASONS.items()}
+from tests.support.scripted_solver import CODE, solver_result
 
 
 def test_predict_tells_a_row_the_solver_gave_up_on_from_contact_lost():
@@ -54,13 +53,7 @@ class _Scripted:
                 velocity[i] = self.v
                 if self.reason is not None:
                     valid[i], code[i], velocity[i] = False, CODE[self.reason], np.nan
-
-        class Result:
-            pass
-
-        r = Result()
-        r.velocity, r.valid, r.reason_code = velocity, valid, code
-        return r
+        return solver_result(velocity, valid, code)
 
 
 def _playing(settings: MpcSettings | None = None):

@@ -313,7 +313,6 @@ class PlantTolerance:
             out[s] = np.diag(g * np.exp(1j * ph)) @ (np.eye(6) + c)
         return out
 
-
     @classmethod
     def from_limits(cls, limits) -> PlantTolerance:
         """The device description's ``limits.plant_uncertainty`` (gain, phase deg, coupling)."""

@@ -1400,19 +1400,18 @@ class MultiTask:
         pose_key = self._pose_key(poses)
         if pose_key != self._memo_poses:
             self._memo, self._memo_poses, self._rows_gave_up = {}, pose_key, {}
-        keys = budget if isinstance(budget, frozenset) else frozenset()
+        keys = budget if isinstance(budget, frozenset) else frozenset()   # on the give-up budget
         probe = self._probe_solver() if budget is True else None
-        suspect = self._gave_up_solver() if keys else None
         new: dict[bytes, PlateMotion] = {}
         for motion in motions:
             hit = self._memo.get(motion.key)
-            budgeted_now = probe is not None or (suspect is not None and motion.key in keys)
+            budgeted_now = probe is not None or motion.key in keys
             if hit is None or (not budgeted_now and hit[2] and not hit[1]):
                 new.setdefault(motion.key, motion)
         if new:
-            on = [m for m in new.values() if suspect is not None and m.key in keys]
-            off = [m for m in new.values() if not (suspect is not None and m.key in keys)]
-            for todo, settings in ((off, probe), (on, suspect)):
+            on = [m for m in new.values() if m.key in keys]
+            off = [m for m in new.values() if m.key not in keys]
+            for todo, settings in ((off, probe), (on, self._gave_up_solver() if on else None)):
                 if todo:
                     self._solve_rows(todo, poses, settings)
         R = len(self._rows)

@@ -312,6 +312,14 @@ def _wrap(a, period: float = 2 * math.pi):
     return (np.asarray(a) + period / 2) % period - period / 2
 
 
+def _poses_near(poses: np.ndarray, ref: np.ndarray, oriented: np.ndarray, max_m: float, max_rad: float) -> bool:
+    """Every row of ``poses`` (n, 3) within ``max_m`` of ``ref``'s position and, where ``oriented``,
+    within ``max_rad`` of its angle; a NaN (unseen) is never near."""
+    d = np.nan_to_num(np.hypot(*(poses[:, :2] - ref[:, :2]).T), nan=np.inf)
+    turn = np.where(oriented, np.nan_to_num(np.abs(_wrap(poses[:, 2] - ref[:, 2])), nan=np.inf), 0.0)
+    return bool(np.all(d <= max_m) and np.all(turn <= max_rad))
+
+
 def part_radius_m(part: PointPart | RigidPart) -> float:
     """Radius of the part's footprint about its pose point (3 mm when none is given)."""
     fp = getattr(part, "footprint", None)
@@ -1008,11 +1016,8 @@ class MultiTask:
         held, gave_up = self._held, self._memo[key][3]
         if not (gave_up and held is not None and held[0] == key and s.hold_gave_up_m > 0):
             return
-        d = np.hypot(*(cmd[:, :2] - held[1][:, :2]).T)
-        turn = np.abs(_wrap(cmd[:, 2] - held[1][:, 2]))
         oriented = np.array([g.theta_rad is not None for g in self.goals])
-        if np.all(np.isfinite(d)) and np.all(d <= s.hold_gave_up_m) and np.all(
-                np.where(oriented, np.nan_to_num(turn, nan=np.inf), 0.0) <= s.hold_gave_up_rad):
+        if _poses_near(cmd, held[1], oriented, s.hold_gave_up_m, s.hold_gave_up_rad):
             v = vel[0].copy()
             v[:G] = held[2][:G]
             self._memo[key] = (v, True, False, False)
@@ -1034,9 +1039,7 @@ class MultiTask:
             if hit is None:
                 continue
             rows, at = hit
-            d = np.nan_to_num(np.hypot(*(cmd[rows, :2] - at[:, :2]).T), nan=np.inf)
-            turn = np.where(oriented[rows], np.nan_to_num(np.abs(_wrap(cmd[rows, 2] - at[:, 2])), nan=np.inf), 0.0)
-            if np.all(d <= s.gave_up_near_m) and np.all(turn <= s.hold_gave_up_rad):
+            if _poses_near(cmd[rows], at, oriented[rows], s.gave_up_near_m, s.hold_gave_up_rad):
                 out.add(m.key)
         return frozenset(out)
 

@@ -922,6 +922,15 @@ class MultiTask:
         self._v_current = self._current_velocity(poses)
         self._hold_playing(poses)
         current_cost, current_vel = self._costs([self.current], poses, statuses)
+        near = all(st.position_error_m <= s.near_m for st in statuses)
+        dwell = s.near_dwell_s if near else s.min_dwell_s
+        if self.current.is_zero() and s.rest_dwell_s is not None:
+            dwell = s.rest_dwell_s   # the plate at rest: no first error of a motion playing to wait out
+        dwelt = t_s - self.t_switch >= dwell - 1e-9
+        if not dwelt and math.isfinite(float(current_cost[0])):
+            # No switch before the dwell is over, and the motion playing is still safe: the search
+            # below could only keep it (it searches only to stop the plate when nothing is).
+            return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
         candidates = [PlateMotion.zero(s.frequency_hz, name="rest")]
         for g, st in zip(self.goals, statuses):
             for kind in s.templates:
@@ -987,11 +996,6 @@ class MultiTask:
                 rest = PlateMotion.zero(self.current.frequency_hz, name="rest")
                 return self._switch(t_s, poses, rest, np.zeros((len(self.goals), 3)))
             return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
-        near = all(st.position_error_m <= s.near_m for st in statuses)
-        dwell = s.near_dwell_s if near else s.min_dwell_s
-        if self.current.is_zero() and s.rest_dwell_s is not None:
-            dwell = s.rest_dwell_s   # the plate at rest: no first error of a motion playing to wait out
-        dwelt = t_s - self.t_switch >= dwell - 1e-9
         if dwelt and self._better(float(final_cost[0]), float(current_cost[0]), poses, statuses):
             return self._switch(t_s, poses, best_motion, final_vel[0])
         return self._switch(t_s, poses, self.current, current_vel[0], keep=True)

@@ -809,3 +809,47 @@ def test_a_bracket_whose_turn_the_translation_scale_mispredicts_is_brought_in():
     assert math.hypot(final[0] + 0.0197, final[1] - 0.0043) <= 1e-3
     assert abs(math.degrees((final[2] - 0.7313 + math.pi) % (2 * math.pi) - math.pi)) <= 2.0
     assert task.state[0].turn != pytest.approx(1.0)      # the turn's scale was learned
+
+
+def test_a_replanning_step_within_the_dwell_solves_only_the_motion_playing(monkeypatch):
+    # Before min_dwell_s is over no switch may happen: the search could only keep the motion playing,
+    # so it is not run (the heavy part of a step: templates, envelope fits, Gauss-Newton probes),
+    # unless that motion is no longer safe to keep (then the search decides whether to stop the plate).
+    from ppod_ros.planning import mpc
+
+    solved = []
+    real = mpc.predict_velocities
+
+    def counting(motions, part, configs, settings=None, **kw):
+        solved.append({m.key for m in motions})
+        return real(motions, part, configs, settings, **kw)
+
+    monkeypatch.setattr(mpc, "predict_velocities", counting)
+    task = MultiTask([PointPart(0.3)], [PartGoal(0, 0.0, 0.0)], timeout_s=30.0)
+    s = task.settings
+    assert s.min_dwell_s > s.replan_period_s
+    first = task.step(0.0, [[0.04, -0.02, 0.0]])
+    playing = first.motion
+    assert playing is not None and not playing.is_zero() and len(set().union(*solved)) > 5
+    solved.clear()
+    kept = task.step(s.replan_period_s, [[0.039, -0.0195, 0.0]])
+    assert kept.plan_ms > 0 and kept.motion is None and task.current.key == playing.key
+    assert set().union(*solved) <= {playing.key}
+    # The dwell over: the full search again.
+    solved.clear()
+    task.step(s.min_dwell_s, [[0.038, -0.019, 0.0]])
+    assert len(set().union(*solved)) > 5
+
+    # Within the dwell but the motion playing no longer safe (here: its cost made infinite): searched.
+    task = MultiTask([PointPart(0.3)], [PartGoal(0, 0.0, 0.0)], timeout_s=30.0)
+    playing = task.step(0.0, [[0.04, -0.02, 0.0]]).motion
+    real_costs = task._costs
+
+    def unsafe_playing(motions, *a, **kw):
+        cost, vel = real_costs(motions, *a, **kw)
+        return np.where([m.key == playing.key for m in motions], np.inf, cost), vel
+
+    monkeypatch.setattr(task, "_costs", unsafe_playing)
+    solved.clear()
+    task.step(s.replan_period_s, [[0.039, -0.0195, 0.0]])
+    assert len(set().union(*solved)) > 5

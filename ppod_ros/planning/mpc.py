@@ -635,6 +635,9 @@ class MultiTask:
         self.finished: MultiStep | None = None
         self.phase = "planning"
         self.plan_times_ms: list[float] = []
+        self.plan_searched: list[bool] = []   # per replanning step (as plan_times_ms): the candidates were
+                                              # searched (not a step within the dwell that kept the motion)
+        self._searched = False
         self.last_pose: dict[int, np.ndarray] = {}
         self.progress: list[tuple[float, float]] = []
         self.focus: int | None = None
@@ -731,9 +734,11 @@ class MultiTask:
                     poses[row] = self.last_pose[row]
                 w0 = time.perf_counter()
                 self._estimate(t_s, poses)
+                self._searched = False
                 motion = self._plan(t_s, poses, statuses)
                 plan_ms = 1e3 * (time.perf_counter() - w0)
                 self.plan_times_ms.append(plan_ms)
+                self.plan_searched.append(self._searched)
                 self.t_plan = t_s
         return MultiStep(motion, self.phase, False, None, *self._worst(statuses), self._text(statuses),
                          tuple(statuses), plan_ms)
@@ -931,6 +936,7 @@ class MultiTask:
             # No switch before the dwell is over, and the motion playing is still safe: the search
             # below could only keep it (it searches only to stop the plate when nothing is).
             return self._switch(t_s, poses, self.current, current_vel[0], keep=True)
+        self._searched = True
         candidates = [PlateMotion.zero(s.frequency_hz, name="rest")]
         for g, st in zip(self.goals, statuses):
             for kind in s.templates:

@@ -40,3 +40,6 @@ def test_the_multipart_section_runs_both_planners_on_the_same_scenes(tmp_path, c
     # The planning thread's CPU per replanning step beside the wall time (load-independent).
     assert len(mpc["plan_cpu_ms"]) == len(mpc["plan_ms"]) and all(t > 0 for t in mpc["plan_cpu_ms"])
     assert "thread CPU median" in out
+    # The steps that searched the candidates, apart (the others kept the motion within its dwell).
+    assert 0 < len(mpc["plan_cpu_searched_ms"]) < len(mpc["plan_cpu_ms"])
+    assert set(mpc["plan_cpu_searched_ms"]) <= set(mpc["plan_cpu_ms"]) and "steps that searched" in out

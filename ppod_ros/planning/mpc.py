@@ -66,7 +66,11 @@ class MpcSettings:
     ramp_s: float = 0.5                   # the generator's ramp on a switch (device default_ramp_s)
     approach_per_s: float = 0.8           # waypoint: this fraction of the error per horizon second
     frequency_hz: float = DEFAULT_FREQUENCY_HZ  # of the searched motions
-    harmonics: int = 1                    # 1: 11 real inputs; 2: 23
+    harmonics: int = 1                    # 1: 11 real inputs; 2: 23 (the Gauss-Newton search's)
+    two_harmonics_from_parts: int = 3     # ... and 2 whenever at least this many parts are commanded (0: never):
+                                          # a one-frequency field is near linear, 6 coefficients for three
+                                          # parts' 6 velocities and more; two frequencies reach more fields
+                                          # (docs/planner.md, "Measured")
     headroom: float = 0.15                # fraction under every device limit
     plant_tolerance: PlantTolerance | None = PlantTolerance()  # actuator errors whose corrected tables must
                                           # pass the checker too (planning/envelope.py); None: nominal only
@@ -251,6 +255,9 @@ class MpcSettings:
             raise ConfigError(f"templates: unknown kind {unknown[0]!r}; expected some of {', '.join(TEMPLATES)}")
         if self.harmonics not in (1, 2):
             raise ConfigError(f"harmonics: expected 1 or 2, got {self.harmonics!r}")
+        if not (isinstance(self.two_harmonics_from_parts, int) and self.two_harmonics_from_parts >= 0):
+            raise ConfigError(f"two_harmonics_from_parts: expected an integer >= 0 (0: never), "
+                              f"got {self.two_harmonics_from_parts!r}")
         if not 0.0 <= self.headroom < 0.5:
             raise ConfigError(f"headroom: expected 0..0.5 (fraction), got {self.headroom!r}")
         for name in ("probe_max_steps_per_period", "probe_max_periods", "gave_up_max_steps_per_period",
@@ -625,6 +632,8 @@ class MultiTask:
         self.timeout = float(timeout_s)
         self.keep_clear = bool(keep_clear)
         self.symmetry = {g.index: _symmetry(self.parts[g.index]) for g in self.goals}
+        n2 = self.settings.two_harmonics_from_parts
+        self.harmonics = 2 if n2 and len(self.goals) >= n2 else self.settings.harmonics  # of the search
         self.radius = np.array([part_radius_m(p) for p in self.parts])
         self.state = {g.index: _Tracked() for g in self.goals}
         self.t0: float | None = None
@@ -1475,7 +1484,7 @@ class MultiTask:
         no Jacobian column, a trial not converged within it is not taken."""
         s = self.settings
         freq = start.frequency_hz
-        harmonics = s.harmonics
+        harmonics = self.harmonics
         v = _to_vector(start, harmonics)
         best_cost = float(self._costs([start], poses, statuses)[0][0])
         best = start

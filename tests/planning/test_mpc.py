@@ -63,21 +63,27 @@ def test_bracket_with_unknown_friction_reaches_pose_and_is_held_at_rest():
     assert any(abs(st.velocity_scale - 1.0) > 0.05 for s in run.steps for st in s.parts)
 
 
-def test_three_parts_to_three_goals_at_once():
+@pytest.mark.parametrize("two_from", [0, 3])
+def test_three_parts_to_three_goals_at_once(two_from):
+    # Over one frequency (two_harmonics_from_parts 0) and over two (3, the default for three parts).
     bracket = published_rigid_part()
     washer = PointPart(0.3)
     model = [bracket, washer, washer]
     true = [_with_mu(bracket, 0.35), PointPart(0.25), PointPart(0.4)]
     goals = [PartGoal(0, 0.02, -0.02, 0.0, 2e-3, math.radians(3)), PartGoal(1, -0.03, 0.03, None, 2e-3),
              PartGoal(2, 0.03, 0.03, None, 2e-3)]
-    task = MultiTask(model, goals, timeout_s=60.0)
+    task = MultiTask(model, goals, timeout_s=60.0, settings=MpcSettings(two_harmonics_from_parts=two_from))
+    assert task.harmonics == (2 if two_from else 1)
     run = _run(task, true, [[0.05, -0.04, 0.9], [-0.05, 0.045, 0.0], [0.055, 0.045, 0.0]], seed=2)
     assert run.step.done, run.step.text
     for g in goals:
         p = run.configurations[g.index]
         assert math.hypot(p[0] - g.x_m, p[1] - g.y_m) <= g.position_tol_m * 1.2
-    # No contact loss, and never a jump between camera frames.
-    assert run.hops == 0
+    # No contact loss over one frequency, and never a jump between camera frames. Over two, this run's
+    # bracket loses contact briefly 3 times (the full dynamics against the solver's limit cycle: the
+    # known limit in docs/planner.md; the benchmark's three-part scenes 0-9 counted 97 such hops over
+    # two frequencies against 220 over one).
+    assert run.hops == 0 if not two_from else run.hops <= 5
     assert np.hypot(*np.diff(run.trajectory[:, :, :2], axis=0).transpose(2, 0, 1)).max() < 3e-3
     assert len(run.step.parts) == 3 and all(st.reached for st in run.step.parts)
 
@@ -854,3 +860,35 @@ def test_a_replanning_step_within_the_dwell_solves_only_the_motion_playing(monke
     solved.clear()
     task.step(s.replan_period_s, [[0.039, -0.0195, 0.0]])
     assert len(set().union(*solved)) > 5
+
+
+def test_three_parts_or_more_are_planned_over_two_frequencies(monkeypatch):
+    # A one-frequency field is near linear: 6 coefficients for three parts' six velocities, and no
+    # room for a fourth part or a turn. The search runs over two harmonics (23 inputs) from three
+    # commanded parts on (MpcSettings.two_harmonics_from_parts), over one below.
+    from ppod_ros.planning import mpc
+
+    seen = []
+    real = mpc.predict_velocities
+
+    def recording(motions, part, configs, settings=None, **kw):
+        seen.extend(len(m.pruned().k) and int(m.pruned().k.max()) for m in motions)
+        return real(motions, part, configs, settings, **kw)
+
+    monkeypatch.setattr(mpc, "predict_velocities", recording)
+    washer = PointPart(0.3)
+    goals = [PartGoal(0, 0.03, 0.0), PartGoal(1, -0.03, 0.0), PartGoal(2, 0.0, 0.03)]
+    starts = [[0.0, -0.03, 0.0], [0.03, 0.03, 0.0], [-0.03, -0.01, 0.0]]
+    three = MultiTask([washer] * 3, goals, timeout_s=30.0)
+    assert three.harmonics == 2
+    assert three.step(0.0, starts).motion is not None
+    assert max(seen) == 2                       # the probes reach the second harmonic
+    seen.clear()
+    two = MultiTask([washer] * 2, goals[:2], timeout_s=30.0)
+    assert two.harmonics == 1
+    assert two.step(0.0, starts[:2]).motion is not None
+    assert max(seen) == 1
+    assert MultiTask([washer] * 3, goals, settings=MpcSettings(two_harmonics_from_parts=0)).harmonics == 1
+    assert MultiTask([washer] * 2, goals[:2], settings=MpcSettings(harmonics=2)).harmonics == 2
+    with pytest.raises(ConfigError, match="two_harmonics_from_parts"):
+        MpcSettings(two_harmonics_from_parts=-1)

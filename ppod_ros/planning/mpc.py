@@ -19,7 +19,7 @@ planner chooses the plate motion itself, not a field kind:
             through its goal, the spin of a rigid part in place both ways, the transport the way
             a part not yet near its goal has to go; designed once at the centre and moved with
             exact transformations; the best few ranked fitted into the envelope), then Gauss-Newton
-            steps on the 11 (one frequency) or 23 (two) real inputs from the best of them,
+            steps on the 12 (one frequency) or 24 (two) real inputs from the best of them,
             with finite-difference Jacobians evaluated in one batched call and a trust region
             (``max_change``, relative to the typical axis scales) so a switch is a small change:
             with the generator's ramp and the feedback's predicted first error the parts follow
@@ -66,7 +66,7 @@ class MpcSettings:
     ramp_s: float = 0.5                   # the generator's ramp on a switch (device default_ramp_s)
     approach_per_s: float = 0.8           # waypoint: this fraction of the error per horizon second
     frequency_hz: float = DEFAULT_FREQUENCY_HZ  # of the searched motions
-    harmonics: int = 1                    # 1: 11 real inputs; 2: 23 (the Gauss-Newton search's)
+    harmonics: int = 1                    # 1: 12 real inputs; 2: 24 (the Gauss-Newton search's)
     two_harmonics_from_parts: int = 3     # ... and 2 whenever at least this many parts are commanded (0: never):
                                           # a one-frequency field is near linear, 6 coefficients for three
                                           # parts' 6 velocities and more; two frequencies reach more fields

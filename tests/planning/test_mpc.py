@@ -864,7 +864,7 @@ def test_a_replanning_step_within_the_dwell_solves_only_the_motion_playing(monke
 
 def test_three_parts_or_more_are_planned_over_two_frequencies(monkeypatch):
     # A one-frequency field is near linear: 6 coefficients for three parts' six velocities, and no
-    # room for a fourth part or a turn. The search runs over two harmonics (23 inputs) from three
+    # room for a fourth part or a turn. The search runs over two harmonics (24 inputs) from three
     # commanded parts on (MpcSettings.two_harmonics_from_parts), over one below.
     from ppod_ros.planning import mpc
 

@@ -63,12 +63,15 @@ class PlateMotion:
     ramp_time_s: float | None = None
     _key: bytes = field(init=False, repr=False, compare=False)
     _zero: bool = field(init=False, repr=False, compare=False)
+    _memo: dict = field(init=False, repr=False, compare=False)   # values derived from the (immutable)
+    # arrays by other modules, e.g. the solver's coefficient table
 
     def __post_init__(self) -> None:
         if not self._init_checked_arrays():
             self._init_validated()
         object.__setattr__(self, "_key", _motion_key(self.frequency_hz, self.k, self.amplitude, self.phase))
         object.__setattr__(self, "_zero", not np.any(self.amplitude > 0))
+        object.__setattr__(self, "_memo", {})
 
     def _init_checked_arrays(self) -> bool:
         """The common construction from arrays (the planner builds about 90 motions per replanning

@@ -392,9 +392,9 @@ def _motion_key(frequency_hz: float, k: np.ndarray, amplitude: np.ndarray, phase
     # change the motion, and phases are compared modulo 2 pi.
     X = amplitude * np.exp(1j * phase)   # PlateMotion.phasors
     X = np.where(np.abs(X) > 0, X, 0.0)
-    keep = np.any(X != 0, axis=1)
+    keep = (X != 0).any(axis=1)   # (the methods np.any and np.round call, without their wrappers)
     h.update(k[keep].tobytes())
-    h.update((np.round(X[keep].view(float), 10) + 0.0).tobytes())
+    h.update((X[keep].view(float).round(10) + 0.0).tobytes())
     return h.digest()
 
 

@@ -44,6 +44,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -318,6 +319,17 @@ def _poses_near(poses: np.ndarray, ref: np.ndarray, oriented: np.ndarray, max_m:
     d = np.nan_to_num(np.hypot(*(poses[:, :2] - ref[:, :2]).T), nan=np.inf)
     turn = np.where(oriented, np.nan_to_num(np.abs(_wrap(poses[:, 2] - ref[:, 2])), nan=np.inf), 0.0)
     return bool(np.all(d <= max_m) and np.all(turn <= max_rad))
+
+
+@lru_cache(maxsize=64)
+def _pairs(n: int, G: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair (a, b) of n parts with a < G and b > a, in the order of the double loop over a, then
+    b (read-only index arrays)."""
+    ia, ib = np.triu_indices(n, 1)
+    first = ia < G
+    ia, ib = ia[first], ib[first]
+    ia.flags.writeable = ib.flags.writeable = False
+    return ia, ib
 
 
 def part_radius_m(part: PointPart | RigidPart) -> float:
@@ -1382,14 +1394,11 @@ class MultiTask:
         others = [self._others[j] for j in others]
         centres = np.concatenate([pred[..., :2], pred_others], axis=1)
         radii = np.concatenate([self.radius[idx], self.radius[others]])
-        pen = []
-        n = centres.shape[1]
-        for a in range(G):
-            for b in range(a + 1, n):
-                d = np.hypot(*(centres[:, a] - centres[:, b]).T)
-                pen.append(np.maximum(0.0, radii[a] + radii[b] + s.clearance_m - d) * s.collision_weight)
-        if pen:
-            parts.append(np.stack(pen, axis=1))
+        ia, ib = _pairs(centres.shape[1], G)
+        if ia.size:
+            diff = centres[:, ia] - centres[:, ib]
+            d = np.hypot(diff[..., 0], diff[..., 1])
+            parts.append(np.maximum(0.0, (radii[ia] + radii[ib]) + s.clearance_m - d) * s.collision_weight)
         return np.concatenate(parts, axis=1) / s.max_speed_mps, vel, ok
 
     def _pose_key(self, poses: np.ndarray) -> bytes:

@@ -62,8 +62,50 @@ class PlateMotion:
     name: str = ""
     ramp_time_s: float | None = None
     _key: bytes = field(init=False, repr=False, compare=False)
+    _zero: bool = field(init=False, repr=False, compare=False)
+    _memo: dict = field(init=False, repr=False, compare=False)   # values derived from the (immutable)
+    # arrays by other modules, e.g. the solver's coefficient table
 
     def __post_init__(self) -> None:
+        if not self._init_checked_arrays():
+            self._init_validated()
+        object.__setattr__(self, "_key", _motion_key(self.frequency_hz, self.k, self.amplitude, self.phase))
+        object.__setattr__(self, "_zero", not np.any(self.amplitude > 0))
+        object.__setattr__(self, "_memo", {})
+
+    def _init_checked_arrays(self) -> bool:
+        """The common construction from arrays (the planner builds about 90 motions per replanning
+        step): float64 amplitudes and phases (K, 6), int64 harmonics already ascending, no ramp time.
+        The same checks as :meth:`_init_validated` in fewer steps; False (nothing set) for any input
+        outside that case or failing a check, which the validated path then reports."""
+        f, k, amp, ph = self.frequency_hz, self.k, self.amplitude, self.phase
+        if not (type(f) in (float, np.float64) and math.isfinite(f) and f > 0.0 and self.ramp_time_s is None
+                and type(self.name) is str and type(k) is np.ndarray and k.dtype == np.int64 and k.ndim == 1
+                and type(amp) is np.ndarray and amp.dtype == np.float64
+                and type(ph) is np.ndarray and ph.dtype == np.float64):
+            return False
+        K = k.shape[0]
+        if amp.shape != (K, 6) or ph.shape != (K, 6):
+            return False
+        ks = k.tolist()
+        last = 0
+        for kk in ks:   # each in 1..MAX_HARMONIC, strictly ascending (so each at most once)
+            if not last < kk <= MAX_HARMONIC:
+                return False
+            last = kk
+        if K and not (np.isfinite(amp).all() and np.isfinite(ph).all() and (amp >= 0.0).all()):
+            return False
+        k, amp, ph = k.copy(), amp.copy(), ph.copy()
+        for arr in (k, amp, ph):
+            arr.setflags(write=False)
+        object.__setattr__(self, "frequency_hz", float(f))
+        object.__setattr__(self, "k", k)
+        object.__setattr__(self, "amplitude", amp)
+        object.__setattr__(self, "phase", ph)
+        return True
+
+    def _init_validated(self) -> None:
+        """Validate and normalise any input (the MOTION.yaml rules); ConfigError naming the field."""
         f = check_number(self.frequency_hz, "frequency_hz", min_value=0.0, exclusive_min=True, unit="Hz")
         k = np.asarray(self.k)
         if k.ndim != 1:
@@ -96,16 +138,6 @@ class PlateMotion:
         object.__setattr__(self, "k", k)
         object.__setattr__(self, "amplitude", amp)
         object.__setattr__(self, "phase", ph)
-        h = hashlib.sha1()
-        h.update(np.float64(self.frequency_hz).tobytes())
-        # The key identifies the motion physically: zero-amplitude entries and their phases do not
-        # change the motion, and phases are compared modulo 2 pi.
-        X = self.phasors()
-        X = np.where(np.abs(X) > 0, X, 0.0)
-        keep = np.any(X != 0, axis=1)
-        h.update(k[keep].tobytes())
-        h.update((np.round(X[keep].view(float), 10) + 0.0).tobytes())
-        object.__setattr__(self, "_key", h.digest())
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -239,11 +271,14 @@ class PlateMotion:
         return np.any(self.amplitude > 0, axis=0) if self.k.size else np.zeros(6, bool)
 
     def is_zero(self) -> bool:
-        return not np.any(self.amplitude > 0)
+        return self._zero
 
     def pruned(self) -> PlateMotion:
-        """The same motion without harmonics whose six amplitudes are all zero."""
+        """The same motion without harmonics whose six amplitudes are all zero (this motion itself
+        when it has none: motions are immutable)."""
         keep = np.any(self.amplitude > 0, axis=1)
+        if keep.all():
+            return self
         return PlateMotion(self.frequency_hz, self.k[keep], self.amplitude[keep], self.phase[keep],
                            name=self.name, ramp_time_s=self.ramp_time_s)
 
@@ -347,6 +382,20 @@ def acceleration_error(goal: np.ndarray, achieved: np.ndarray, length_scale_m: f
     e = np.linalg.norm((achieved - goal) * scale)
     g = np.linalg.norm(goal * scale)
     return float(e), float(e / g) if g > 0 else (0.0 if e == 0 else math.inf)
+
+
+def _motion_key(frequency_hz: float, k: np.ndarray, amplitude: np.ndarray, phase: np.ndarray) -> bytes:
+    """:attr:`PlateMotion.key` of validated arrays."""
+    h = hashlib.sha1()
+    h.update(np.float64(frequency_hz).tobytes())
+    # The key identifies the motion physically: zero-amplitude entries and their phases do not
+    # change the motion, and phases are compared modulo 2 pi.
+    X = amplitude * np.exp(1j * phase)   # PlateMotion.phasors
+    X = np.where(np.abs(X) > 0, X, 0.0)
+    keep = (X != 0).any(axis=1)   # (the methods np.any and np.round call, without their wrappers)
+    h.update(k[keep].tobytes())
+    h.update((X[keep].view(float).round(10) + 0.0).tobytes())
+    return h.digest()
 
 
 __all__ = [

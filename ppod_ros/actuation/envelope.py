@@ -44,6 +44,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -110,7 +111,15 @@ def _vertex(ym: np.ndarray, y0: np.ndarray, yp: np.ndarray, step: float) -> np.n
     curvature = ym - 2.0 * y0 + yp
     # Divided only where the parabola opens downwards (no warnings, no errstate context per call).
     d = np.divide(0.5 * step * (ym - yp), curvature, out=np.zeros_like(curvature), where=curvature < 0)
-    return np.clip(d, -step, step)
+    return np.minimum(np.maximum(d, -step), step)   # np.clip without its per-call overhead
+
+
+@lru_cache(maxsize=16)
+def _grid(n_samples: int) -> np.ndarray:
+    """The first pass's phases 2 pi n / N (read-only, one array per N)."""
+    theta = 2.0 * math.pi * np.arange(n_samples) / n_samples
+    theta.flags.writeable = False
+    return theta
 
 
 def refined_max(fn, n_samples: int) -> np.ndarray:
@@ -131,7 +140,7 @@ def refined_max(fn, n_samples: int) -> np.ndarray:
         refined once more with a parabola on a grid :data:`REFINE_ZOOM` times finer (the extremum to
         about 1e-10 relative; a 64-sample grid alone reads a sinusoid's crest up to 0.12 % low).
     """
-    theta = 2.0 * math.pi * np.arange(n_samples) / n_samples
+    theta = _grid(n_samples)
     y = np.asarray(fn(theta), dtype=float)
     best = np.max(y, axis=0)
     C = y.shape[1]
@@ -331,7 +340,11 @@ class PlantTolerance:
         """Complex points whose convex hull contains every per-actuator factor ``g e^{i phi}`` within
         the tolerance: the outer arc's points, the corners of the polygon circumscribing it
         (``segments`` pieces) and the two inner corners. Every real quantity linear in ``M`` takes its
-        largest value over the tolerance at one of them (:func:`worst_over_plants`)."""
+        largest value over the tolerance at one of them (:func:`worst_over_plants`). Read-only (the
+        same array for the same tolerance and segments)."""
+        return _factor_hull(self, segments)
+
+    def _factor_hull(self, segments: int) -> np.ndarray:
         gmax, gmin, top = 1.0 + self.gain, 1.0 - self.gain, math.radians(self.phase_deg)
         if top == 0.0:
             return np.array([gmax, gmin], dtype=complex)
@@ -341,6 +354,13 @@ class PlantTolerance:
         tangents = gmax / math.cos(half) * np.exp(1j * (phi[:-1] + half))
         inner = gmin * np.exp(1j * np.array([-top, top]))
         return np.concatenate([outer, tangents, inner])
+
+
+@lru_cache(maxsize=32)
+def _factor_hull(tolerance: PlantTolerance, segments: int) -> np.ndarray:
+    hull = tolerance._factor_hull(segments)
+    hull.flags.writeable = False
+    return hull
 
 
 def worst_over_plants(W: np.ndarray, tolerance: PlantTolerance) -> tuple[np.ndarray, np.ndarray]:
@@ -395,6 +415,7 @@ class Envelope:
         self.config = config
         self.plant = plant if plant is not None else NominalPlant(config)
         self.kinematics = self.plant.kinematics
+        self._limit_values = self._limits_of(config)
 
     # ------------------------------------------------------------------ frequencies
     def forbidden(self, frequency_hz: float, k) -> list[tuple[int, str, float]]:
@@ -620,7 +641,12 @@ class Envelope:
 
     # ------------------------------------------------------------------ pieces
     def _limits(self) -> dict[str, float]:
-        lim = self.config.limits
+        """Limit name -> limit value (a report's own copy)."""
+        return dict(self._limit_values)
+
+    @staticmethod
+    def _limits_of(config: DeviceConfig) -> dict[str, float]:
+        lim = config.limits
         return {
             "limits.frequency_range_hz": float(lim.frequency_range_hz[1]),
             "limits.excluded_bands_hz": float("nan"),
@@ -670,7 +696,7 @@ class Envelope:
     def _peak(self, name: str, peaks: np.ndarray, values: dict, ratios: dict, worst: dict) -> None:
         j = int(np.argmax(peaks))
         values[name] = float(peaks[j])
-        ratios[name] = float(peaks[j]) / self._limits()[name]
+        ratios[name] = float(peaks[j]) / self._limit_values[name]
         worst[name] = j
 
     def _actuators(self, I, current_peak, voltage_peak, values: dict, ratios: dict, worst: dict) -> None:

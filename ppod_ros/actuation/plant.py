@@ -83,6 +83,7 @@ class NominalPlant:
     def __init__(self, config: DeviceConfig):
         self.config = config
         self._solved: dict[tuple, np.ndarray] = {}   # responses(): (s I - A)^-1 B per set of frequencies
+        self._derived: dict[tuple, np.ndarray] = {}  # responses() per output, inverse_response(), from them
         a = config.actuators
         fl = config.flexures
         self.kinematics = StewartKinematics(config.geometry)
@@ -174,11 +175,17 @@ class NominalPlant:
             X = np.linalg.solve(s * np.eye(NX) - self.A, np.broadcast_to(self.B[:, :6], f.shape + (NX, 6)))
             if len(self._solved) >= _SOLVED_CACHE:
                 self._solved.clear()
+                self._derived.clear()
             self._solved[key] = X
         out = {}
         for name in outputs:
-            Cy, Dy = self.output_matrices(name)
-            out[name] = Cy @ X + Dy[:, :6]
+            Y = self._derived.get((key, name))
+            if Y is None:
+                Cy, Dy = self.output_matrices(name)
+                Y = Cy @ X + Dy[:, :6]
+                Y.flags.writeable = False
+                self._derived[(key, name)] = Y
+            out[name] = Y.copy()
         return out
 
     def frequency_response(self, freq_hz) -> np.ndarray:
@@ -189,8 +196,16 @@ class NominalPlant:
         return self.response(freq_hz, "accel")
 
     def inverse_response(self, freq_hz) -> np.ndarray:
-        """Plate acceleration phasors -> coil-current phasors (A), the feed-forward map, (..., 6, 6)."""
-        return np.linalg.inv(self.frequency_response(freq_hz))
+        """Plate acceleration phasors -> coil-current phasors (A), the feed-forward map, (..., 6, 6)
+        (remembered with the solve it inverts; callers get their own copies)."""
+        f = self._freqs(freq_hz)
+        key = ((f.shape, f.tobytes()), None)
+        Ginv = self._derived.get(key)
+        if Ginv is None:
+            Ginv = np.linalg.inv(self.frequency_response(f))
+            Ginv.flags.writeable = False
+            self._derived[key] = Ginv
+        return Ginv.copy()
 
     def feedforward(self, motion: PlateMotion, kmax: int | None = None) -> np.ndarray:
         """Coil-current phasors (A) that make the nominal plant follow ``motion``.

@@ -259,6 +259,38 @@ class WarmStarts:
                 _, old = self._groups.popitem(last=False)
                 self._count -= len(old)
 
+    def store_all(self, prefix: tuple, configs: np.ndarray, starts: np.ndarray, rates: np.ndarray,
+                  ok: np.ndarray, secants: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """:meth:`store` of M motions' results at the same configurations (N, dim), in motion order
+        (``starts`` (M, N, dim), ``rates`` and ``ok`` (M, N), ``secants`` (dx, dF (M, N, rows, dim),
+        count (M, N))), as one entry per configuration: the one the last of those calls leaves, the
+        last converged motion's start and rate with the secant differences of the last converged
+        motion that counted some (else those stored before)."""
+        with self._lock:
+            group = self._groups.setdefault(prefix, {})
+            self._groups.move_to_end(prefix)
+            before = len(group)
+            counted = ok & (secants[2] > 0)
+            for i, row in enumerate(configs):
+                good = np.flatnonzero(ok[:, i])
+                if not good.size:
+                    continue
+                key = row.tobytes()
+                m = good[-1]
+                entry = (starts[m, i].copy(), float(rates[m, i]))
+                with_secants = np.flatnonzero(counted[:, i])
+                if with_secants.size:
+                    j = with_secants[-1]
+                    k = int(secants[2][j, i])
+                    entry += (np.stack([secants[0][j, i, :k], secants[1][j, i, :k]]),)
+                elif key in group and len(group[key]) > 2:
+                    entry += group[key][2:]
+                group[key] = entry
+            self._count += len(group) - before
+            while self._count > self.max_entries and len(self._groups) > 1:
+                _, old = self._groups.popitem(last=False)
+                self._count -= len(old)
+
 
 #: The process-wide warm starts used by :func:`solve_fields` (and by :func:`solve_field` on request).
 WARM_STARTS = WarmStarts()
@@ -382,6 +414,7 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
         raise ConfigError(f"settings: expected SolverSettings, got {type(settings).__name__}")
     M = len(motions)
     cfg = _configs_per_motion(configs, part, M, "configs")
+    shared = cfg[0] if np.ndim(configs) == 2 else None   # one set of configurations for every motion
     x_init = None if initial is None else _configs_per_motion(initial, part, M, "initial")
     if x_init is not None and x_init.shape != cfg.shape:
         raise ConfigError(f"initial: expected shape {cfg.shape[1:]} or {cfg.shape} like configs, "
@@ -405,7 +438,7 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
     rates = np.ones((M, N))
     miss = np.ones((M, N), bool)
     store = cache if cache is not None else FIELD_CACHE
-    skey = settings.cache_key()
+    skey = settings.cache_key() if settings.cache else None
     if settings.cache:
         for m, motion in enumerate(motions):
             miss[m], found = store.lookup((motion.key, part.key, skey), cfg[m])
@@ -415,14 +448,19 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
     X0 = np.zeros((M, N, dim))
     R0 = np.ones((M, N))
     has = np.zeros((M, N), np.bool_)
-    wkey = (part.key, settings.warm_key())   # the work caps do not change a converged cycle
+    wkey = (part.key, settings.warm_key()) if store_w is not None else None   # the work caps do not
+    # change a converged cycle
     # Each row's own secant differences travel only with warm starts from earlier calls.
     srows = settings.anderson_depth if (store_w is not None and settings.fixed_point == "anderson"
                                         and x_init is None) else 0
     SX0 = np.zeros((M, N, srows, dim))
     SF0 = np.zeros((M, N, srows, dim))
     SN0 = np.zeros((M, N), np.int64)
-    if store_w is not None:
+    if store_w is not None and shared is not None:   # the same rows for every motion: looked up once
+        X0[:], R0[:], has[:] = store_w.lookup(wkey, shared, dim)
+        if srows:
+            SX0[:], SF0[:], SN0[:] = store_w.secants(wkey, shared, dim, srows)
+    elif store_w is not None:
         for m in range(M):
             X0[m], R0[m], has[m] = store_w.lookup(wkey, cfg[m], dim)
             if srows:
@@ -460,15 +498,21 @@ def solve_fields(motions: Sequence[PlateMotion], part: PointPart | RigidPart, co
                 velocity[m, rows], start[m, rows], code[m, rows] = ov[m, :k], ox[m, :k], os_[m, :k]
                 periods[m, rows], stick[m, rows], rates[m, rows] = op[m, :k], of[m, :k], orate[m, :k]
                 sec_x[m, rows], sec_f[m, rows], sec_n[m, rows] = osx[m, :k], osf[m, :k], osn[m, :k]
-        for m, motion in enumerate(motions):
-            rows = np.flatnonzero(miss[m])
-            if settings.cache and rows.size:
-                entries = [(velocity[m, i].copy(), start[m, i].copy(), int(code[m, i]), float(stick[m, i]))
-                           for i in rows]
-                store.store((motion.key, part.key, skey), cfg[m, rows], entries)
-            if store_w is not None and rows.size:
-                store_w.store(wkey, cfg[m, rows], start[m, rows], rates[m, rows], code[m, rows] == lay.OK,
-                              (sec_x[m, rows], sec_f[m, rows], sec_n[m, rows]))
+        if settings.cache:
+            for m, motion in enumerate(motions):
+                rows = np.flatnonzero(miss[m])
+                if rows.size:
+                    entries = [(velocity[m, i].copy(), start[m, i].copy(), int(code[m, i]), float(stick[m, i]))
+                               for i in rows]
+                    store.store((motion.key, part.key, skey), cfg[m, rows], entries)
+        if store_w is not None and shared is not None and sel is None:
+            store_w.store_all(wkey, shared, start, rates, code == lay.OK, (sec_x, sec_f, sec_n))
+        elif store_w is not None:
+            for m in range(M):
+                rows = np.flatnonzero(miss[m])
+                if rows.size:
+                    store_w.store(wkey, cfg[m, rows], start[m, rows], rates[m, rows], code[m, rows] == lay.OK,
+                                  (sec_x[m, rows], sec_f[m, rows], sec_n[m, rows]))
     seconds = time.perf_counter() - t_start - setup
     return FieldsResult(cfg, velocity, code == lay.OK, code, periods, stick, start, seconds, setup, part.kind,
                         settings, tuple(m.name for m in motions), int(M * N - todo), nthreads)
@@ -510,12 +554,12 @@ def _run(motions, part, cfg, X0, R0, has, secants, settings, progress):
     earlier calls (rows may be 0); they come back, as they end, after the six field outputs."""
     SX0, SF0, SN0 = secants
     M, n, dim = cfg.shape
-    tables = [motion_table(m, prune=settings.prune_harmonics) for m in motions]
-    rows = np.array([t.shape[0] for t in tables], np.int64)
+    tables = [_table(m, settings.prune_harmonics) for m in motions]
+    rows = np.array([t.shape[0] for t, _ in tables], np.int64)
     MC = np.zeros((M, max(1, int(rows.max())), TABLE_COLS))
-    for m, t in enumerate(tables):
+    for m, (t, _) in enumerate(tables):
         MC[m, :t.shape[0]] = t
-    kmaxs = np.array([table_kmax(t, mo.omega) for t, mo in zip(tables, motions)], np.int64)
+    kmaxs = np.array([kmax for _, kmax in tables], np.int64)
     Ts = np.array([mo.period_s for mo in motions], float)
     tab = INTEGRATORS[settings.integrator]
     kind = 0 if isinstance(part, PointPart) else 1
@@ -563,6 +607,17 @@ def _run(motions, part, cfg, X0, R0, has, secants, settings, progress):
                 progress(M * b, M * n)
     _threads.learn(cost_kind, M * n, time.perf_counter() - t0, nthreads, time.thread_time() - c0)
     return nthreads, setup, (out_v, out_x, out_s, out_p, out_f, out_r, out_sx, out_sf, out_sn)
+
+
+def _table(motion: PlateMotion, prune: bool) -> tuple[np.ndarray, int]:
+    """``motion``'s coefficient table and its highest harmonic (remembered with the motion, which is
+    immutable: the planner solves each candidate once per part model)."""
+    key = ("field_table", prune)
+    out = motion._memo.get(key)
+    if out is None:
+        t = motion_table(motion, prune=prune)
+        out = motion._memo[key] = (t, table_kmax(t, motion.omega))
+    return out
 
 
 def _kernel_for(kind: int, nthreads: int, args: tuple) -> tuple[Callable[..., None], float]:

@@ -171,16 +171,24 @@ class SolverSettings:
     def _values_but(self, *skip: str) -> tuple:
         return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip)
 
+    def _derived(self, name: str, make):
+        """A value computed from the (frozen) fields once per instance."""
+        memo = self.__dict__.setdefault("_memo", {})
+        if name not in memo:
+            memo[name] = make()
+        return memo[name]
+
     def cache_key(self) -> tuple:
         """Everything that can change a result (not threads or the cache switch)."""
-        return self._values_but("threads", "cache")
+        return self._derived("cache_key", lambda: self._values_but("threads", "cache"))
 
     def warm_key(self) -> tuple:
         """What a converged limit cycle depends on: :meth:`cache_key` without the work caps
         (``max_periods``, ``max_steps_per_period``). A row either converges within its caps, to the
         same cycle from the same start, or is not stored as a warm start; so calls that differ only
         in their caps (the planner's budgeted probes) share their warm starts."""
-        return self._values_but("threads", "cache", "max_periods", "max_steps_per_period")
+        return self._derived("warm_key", lambda: self._values_but("threads", "cache", "max_periods",
+                                                                   "max_steps_per_period"))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -190,7 +198,18 @@ class SolverSettings:
         return self.rtol if kind == "point" else self.rigid_rtol
 
     def vector(self, kind: str = "point") -> np.ndarray:
-        """The settings vector S the compiled kernels read (see ``_layout``), for a part kind."""
+        """The settings vector S the compiled kernels read (see ``_layout``), for a part kind (a new
+        array per call)."""
+        S = self._derived(("vector", kind), lambda: self._vector(kind)).copy()
+        S[lay.S_EVENT_ERR_MAX] = _advance.EVENT_ERR_MAX   # module constants: read per call
+        S[lay.S_KAPPA] = _advance.KAPPA_PER_STEP_TOL
+        S[lay.S_KAPPA_DEPART] = _advance.KAPPA_DEPART_PER_STEP_TOL
+        S[lay.S_ZERO_PER_RTOL] = _advance.ZERO_PER_RTOL
+        S[lay.S_LAG_MAX] = _advance.LAG_MAX_RAD
+        return S
+
+    def _vector(self, kind: str) -> np.ndarray:
+        """The part of :meth:`vector` the fields give."""
         tab = INTEGRATORS[self.integrator]
         S = np.zeros(lay.S_SIZE)
         S[lay.S_RTOL] = self.step_rtol(kind)
@@ -213,11 +232,6 @@ class SolverSettings:
         S[lay.S_CHUNK] = self.chunk or CHUNK_SMALL
         S[lay.S_STARTS] = self.rigid_starts
         S[lay.S_MIN_STEPS] = self.min_steps_per_period
-        S[lay.S_EVENT_ERR_MAX] = _advance.EVENT_ERR_MAX
-        S[lay.S_KAPPA] = _advance.KAPPA_PER_STEP_TOL
-        S[lay.S_KAPPA_DEPART] = _advance.KAPPA_DEPART_PER_STEP_TOL
-        S[lay.S_ZERO_PER_RTOL] = _advance.ZERO_PER_RTOL
-        S[lay.S_LAG_MAX] = _advance.LAG_MAX_RAD
         return S
 
     def chunk_for(self, n_configs: int) -> int:

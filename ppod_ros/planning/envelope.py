@@ -78,6 +78,45 @@ def uncorrected_motions(motion: PlateMotion, device, tolerance: PlantTolerance) 
     return [PlateMotion.from_phasors(motion.frequency_hz, active.k, x, name=motion.name) for x in X]
 
 
+#: Checker reports of one-harmonic motions and the corrected tables' worst ratio of motions, checked
+#: before, by their exact arrays: a replanning step fits again the motion it chose, which an earlier
+#: fit returned (a report of a one-harmonic motion does not depend on the motions checked with it:
+#: ``Envelope.check_motions``). Bounded (cleared when full).
+_CHECKED: dict[tuple, object] = {}
+_ROBUST: dict[tuple, float] = {}
+_MEMO_MAX = 1024
+
+
+def _exact(motion: PlateMotion) -> tuple:
+    return (motion.frequency_hz, motion.k.tobytes(), motion.amplitude.tobytes(), motion.phase.tobytes())
+
+
+def _check_motions(envelope, motions: list[PlateMotion]) -> list:
+    """``envelope.check_motions(motions)``, one-harmonic motions checked before taken from ``_CHECKED``."""
+    keys = [(envelope, _exact(m)) if m.k.size == 1 else None for m in motions]
+    reports = [None if key is None else _CHECKED.get(key) for key in keys]
+    miss = [i for i, r in enumerate(reports) if r is None]
+    if miss:
+        if len(_CHECKED) + len(miss) > _MEMO_MAX:
+            _CHECKED.clear()
+        for i, report in zip(miss, envelope.check_motions([motions[i] for i in miss])):
+            reports[i] = report
+            if keys[i] is not None:
+                _CHECKED[keys[i]] = report
+    return reports
+
+
+def _robust(motion: PlateMotion, device, tolerance: PlantTolerance) -> float:
+    """The worst of :func:`corrected_motion_ratios` (remembered by the motion's exact arrays)."""
+    key = (device, tolerance, _exact(motion))
+    out = _ROBUST.get(key)
+    if out is None:
+        if len(_ROBUST) >= _MEMO_MAX:
+            _ROBUST.clear()
+        out = _ROBUST[key] = max(corrected_motion_ratios(motion, device, tolerance).values())
+    return out
+
+
 _MOTION_LIMITS = ("limits.plate_accel_mps2", "limits.plate_angular_accel_radps2", "limits.contact_margin_mps2")
 
 
@@ -132,7 +171,7 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
         return out  # type: ignore[return-value]
     envelope = _envelope(device)
     max_ratio = 1.0 - headroom
-    reports = envelope.check_motions([motions[i] for i in todo])
+    reports = _check_motions(envelope, [motions[i] for i in todo])
     for report in reports:
         if not math.isfinite(report.worst()[1]):
             raise report.error(max_ratio)  # a row at a forbidden frequency: no amplitude fits
@@ -141,8 +180,7 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
     # reading under that bound with the same headroom.
     allowance = float(getattr(device.limits, "plant_model_allowance", 0.0))
     robust = ([0.0] * len(todo) if tolerance is None else
-              [max(corrected_motion_ratios(motions[i], device, tolerance).values()) / (1.0 + allowance)
-               for i in todo])
+              [_robust(motions[i], device, tolerance) / (1.0 + allowance) for i in todo])
     # The generator accepts a goal only if its drive limits hold on every plant within the device's
     # limits.plant_uncertainty (GoalPlanner.plan): that allowance is the goal's room for the plant,
     # so these limits are kept at DRIVE_FIT (read as max_ratio), not with the headroom on top.
@@ -173,7 +211,7 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
             return out  # type: ignore[return-value]
         candidates = [motions[i].scaled(scale) for i, scale in pending]
         still = []
-        for (i, scale), candidate, report in zip(pending, candidates, envelope.check_motions(candidates)):
+        for (i, scale), candidate, report in zip(pending, candidates, _check_motions(envelope, candidates)):
             # The drive limits are linear in the scale but for the legs' second-order terms, which
             # shrink faster: scale times the unscaled ratio (or its bound) bounds the scaled one (no
             # second exact check).

@@ -44,6 +44,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -325,6 +326,17 @@ def _poses_near(poses: np.ndarray, ref: np.ndarray, oriented: np.ndarray, max_m:
     d = np.nan_to_num(np.hypot(*(poses[:, :2] - ref[:, :2]).T), nan=np.inf)
     turn = np.where(oriented, np.nan_to_num(np.abs(_wrap(poses[:, 2] - ref[:, 2])), nan=np.inf), 0.0)
     return bool(np.all(d <= max_m) and np.all(turn <= max_rad))
+
+
+@lru_cache(maxsize=64)
+def _pairs(n: int, G: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair (a, b) of n parts with a < G and b > a, in the order of the double loop over a, then
+    b (read-only index arrays)."""
+    ia, ib = np.triu_indices(n, 1)
+    first = ia < G
+    ia, ib = ia[first], ib[first]
+    ia.flags.writeable = ib.flags.writeable = False
+    return ia, ib
 
 
 def part_radius_m(part: PointPart | RigidPart) -> float:
@@ -674,6 +686,7 @@ class MultiTask:
         self._held_at: bytes | None = None  # the poses (memo key) where the last prediction was held
         self.held_predictions = 0          # replanning steps that held the motion playing's last prediction
         self._fits: dict[bytes, PlateMotion] = {}
+        self._budgets: dict[tuple[int, int], object] = {}   # budgeted solver settings by their caps
         self._memo_poses: bytes | None = None
         self._gave_up_at: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # fitted candidate's name: (the commanded
                                           # rows it gave up at, their poses) where the solver last gave up on it
@@ -1396,14 +1409,11 @@ class MultiTask:
         others = [self._others[j] for j in others]
         centres = np.concatenate([pred[..., :2], pred_others], axis=1)
         radii = np.concatenate([self.radius[idx], self.radius[others]])
-        pen = []
-        n = centres.shape[1]
-        for a in range(G):
-            for b in range(a + 1, n):
-                d = np.hypot(*(centres[:, a] - centres[:, b]).T)
-                pen.append(np.maximum(0.0, radii[a] + radii[b] + s.clearance_m - d) * s.collision_weight)
-        if pen:
-            parts.append(np.stack(pen, axis=1))
+        ia, ib = _pairs(centres.shape[1], G)
+        if ia.size:
+            diff = centres[:, ia] - centres[:, ib]
+            d = np.hypot(diff[..., 0], diff[..., 1])
+            parts.append(np.maximum(0.0, (radii[ia] + radii[ib]) + s.clearance_m - d) * s.collision_weight)
         return np.concatenate(parts, axis=1) / s.max_speed_mps, vel, ok
 
     def _pose_key(self, poses: np.ndarray) -> bytes:
@@ -1471,12 +1481,23 @@ class MultiTask:
         s = self.settings
         if not (s.probe_max_periods or s.probe_max_steps_per_period):
             return None
-        return budgeted(s.probe_max_periods, s.probe_max_steps_per_period)
+        return self._budgeted(s.probe_max_periods, s.probe_max_steps_per_period)
 
     def _gave_up_solver(self):
         """The solver settings of fitted candidates the solver gave up on nearby (``_suspects``)."""
         s = self.settings
-        return budgeted(s.gave_up_max_periods, s.gave_up_max_steps_per_period)
+        return self._budgeted(s.gave_up_max_periods, s.gave_up_max_steps_per_period)
+
+    def _budgeted(self, max_periods: int, max_steps_per_period: int):
+        """``budgeted(max_periods, max_steps_per_period)``, made once per pair of caps (the solver
+        derives its keys and settings vector once per settings object)."""
+        key = (max_periods, max_steps_per_period)
+        if type(max_periods) is not int or type(max_steps_per_period) is not int:
+            return budgeted(max_periods, max_steps_per_period)   # (its errors)
+        out = self._budgets.get(key)
+        if out is None:
+            out = self._budgets[key] = budgeted(max_periods, max_steps_per_period)
+        return out
 
     def _refine(self, start: PlateMotion, poses, statuses) -> tuple[PlateMotion | None, float]:
         """Gauss-Newton steps from ``start``: finite-difference probes and line-search trials solved on

@@ -78,7 +78,11 @@ def predict_velocities(motions: Sequence[PlateMotion], part: PointPart | RigidPa
         vel[moving] = np.where(valid[moving][..., None], vel[moving], np.nan)
         codes = getattr(r, "reason_code", None)   # (tests substitute a solve_fields without it)
         if codes is not None:
-            unconverged[moving] = ~valid[moving] & np.isin(np.asarray(codes), GAVE_UP_CODES)
+            codes = np.asarray(codes)
+            gave = np.zeros(codes.shape, bool)
+            for c in GAVE_UP_CODES:   # np.isin without its per-call overhead
+                gave |= codes == c
+            unconverged[moving] = ~valid[moving] & gave
     return (vel, valid, unconverged) if gave_up else (vel, valid)
 
 

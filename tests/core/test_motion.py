@@ -109,3 +109,78 @@ def test_acceleration_error_scales_angular_axes_by_the_length():
     err, rel = acceleration_error(goal, ach)
     assert err == pytest.approx(math.hypot(0.1, 0.1))
     assert rel == pytest.approx(err / math.hypot(10, 10))
+
+
+# ---------------------------------------------------------------- the checked-arrays construction
+def _validated(f, k, amp, ph, **kw):
+    """The same motion through the general path (a list of harmonics is never the array path)."""
+    return PlateMotion(f, [int(x) for x in k], amp.tolist(), ph.tolist(), **kw)
+
+
+def _reference_key(m):
+    """The motion key as first written (sha1 of the frequency, harmonics and rounded nonzero phasors)."""
+    import hashlib
+
+    h = hashlib.sha1()
+    h.update(np.float64(m.frequency_hz).tobytes())
+    X = m.phasors()
+    X = np.where(np.abs(X) > 0, X, 0.0)
+    keep = np.any(X != 0, axis=1)
+    h.update(m.k[keep].tobytes())
+    h.update((np.round(X[keep].view(float), 10) + 0.0).tobytes())
+    return h.digest()
+
+
+def test_array_construction_matches_the_validated_one_bit_for_bit():
+    rng = np.random.default_rng(3)
+    for K in (0, 1, 2, 3):
+        for _ in range(20):
+            k = np.sort(rng.choice(np.arange(1, 11), K, replace=False)).astype(np.int64)
+            amp = np.abs(rng.normal(size=(K, 6))) * rng.choice([0.0, -0.0, 1.0, 1e-12, 1e-310, 50.0], size=(K, 6))
+            ph = rng.normal(size=(K, 6)) * 7.0
+            f = float(rng.uniform(5, 60))
+            fast = PlateMotion(f, k, amp, ph, name="x")
+            slow = _validated(f, k, amp, ph, name="x")
+            assert fast.key == slow.key == _reference_key(slow) and fast.is_zero() == slow.is_zero()
+            assert type(fast.frequency_hz) is float and fast.frequency_hz == slow.frequency_hz
+            for a, b in ((fast.k, slow.k), (fast.amplitude, slow.amplitude), (fast.phase, slow.phase)):
+                assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+                assert not a.flags.writeable and a.flags.c_contiguous
+            assert fast.pruned().key == slow.pruned().key
+            assert fast.scaled(0.7).key == slow.scaled(0.7).key
+
+
+def test_array_construction_copies_and_still_rejects_bad_values():
+    amp, ph = np.ones((1, 6)), np.zeros((1, 6))
+    m = PlateMotion(30.0, np.array([1]), amp, ph)
+    amp[0, 0] = 5.0
+    assert m.amplitude[0, 0] == 1.0   # the caller's array is not shared
+    for bad in (np.nan, np.inf, -np.inf):
+        a = np.ones((1, 6))
+        a[0, 2] = bad
+        with pytest.raises(ConfigError):
+            PlateMotion(30.0, np.array([1]), a, ph)
+        with pytest.raises(ConfigError):
+            PlateMotion(30.0, np.array([1]), amp, np.full((1, 6), bad))
+        with pytest.raises(ConfigError):
+            PlateMotion(bad, np.array([1]), amp, ph)
+        with pytest.raises(ConfigError):
+            PlateMotion.from_phasors(30.0, [1], np.full((1, 6), complex(bad, 0.0)))
+    with pytest.raises(ConfigError):
+        PlateMotion(30.0, np.array([1]), -np.ones((1, 6)), ph)
+    with pytest.raises(ConfigError):
+        PlateMotion(30.0, np.array([11]), amp, ph)
+    with pytest.raises(ConfigError):
+        PlateMotion(30.0, np.array([2, 2]), np.ones((2, 6)), np.zeros((2, 6)))
+    with pytest.raises(ConfigError):
+        PlateMotion(-30.0, np.array([1]), amp, ph)
+    # Harmonics out of order take the general path, which sorts them.
+    m = PlateMotion(30.0, np.array([3, 1]), np.array([[1.0] * 6, [2.0] * 6]), np.zeros((2, 6)))
+    assert m.k.tolist() == [1, 3] and m.amplitude[0, 0] == 2.0
+
+
+def test_pruned_without_empty_rows_is_the_motion_itself():
+    m = PlateMotion.single(30.0, [1, 0, 0, 0, 0, 0])
+    assert m.pruned() is m
+    two = PlateMotion(30.0, np.array([1, 2]), np.array([[1.0] + [0.0] * 5, [0.0] * 6]), np.zeros((2, 6)))
+    assert two.pruned().k.tolist() == [1] and two.pruned().key == two.key

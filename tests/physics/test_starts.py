@@ -83,3 +83,39 @@ def test_repeated_and_collinear_scattered_configurations_stay_finite():
     assert r.valid.all() and np.isfinite(r.velocity).all()
     same = r.velocity[[0, 2, 3, 5]]
     assert np.abs(same - same[0]).max() < 2e-6
+
+
+def test_warm_starts_of_many_motions_at_shared_configurations_store_as_motion_by_motion():
+    """WarmStarts.store_all (solve_fields with one set of configurations for every motion) leaves the
+    entries, counts and group order that storing each motion's results in turn leaves."""
+    from ppod_ros.physics.field import WarmStarts
+
+    rng = np.random.default_rng(7)
+    for trial in range(40):
+        M, N, rows, dim = int(rng.integers(1, 6)), int(rng.integers(1, 5)), 3, 2 + trial % 2
+        cfg = rng.normal(size=(N, dim))
+        starts, rates = rng.normal(size=(M, N, dim)), rng.uniform(0, 1, (M, N))
+        ok = rng.uniform(size=(M, N)) < 0.6
+        sec = (rng.normal(size=(M, N, rows, dim)), rng.normal(size=(M, N, rows, dim)),
+               rng.integers(0, rows + 1, (M, N)) * (rng.uniform(size=(M, N)) < 0.7))
+        cap, seed = int(rng.integers(3, 12)), int(rng.integers(1 << 30))
+        one, many = WarmStarts(max_entries=cap), WarmStarts(max_entries=cap)
+        for w in (one, many):   # earlier calls: another group, entries with and without secants here
+            r = np.random.default_rng(seed)
+            w.store(("other",), r.normal(size=(4, dim)), r.normal(size=(4, dim)), np.ones(4), np.ones(4, bool))
+            prev = np.concatenate([cfg[: N // 2 + 1], r.normal(size=(1, dim))])
+            w.store(("p",), prev, r.normal(size=(len(prev), dim)), np.ones(len(prev)), np.ones(len(prev), bool),
+                    (r.normal(size=(len(prev), rows, dim)), r.normal(size=(len(prev), rows, dim)),
+                     r.integers(0, 2, len(prev)) * rows))
+        for m in range(M):
+            one.store(("p",), cfg, starts[m], rates[m], ok[m], (sec[0][m], sec[1][m], sec[2][m]))
+        many.store_all(("p",), cfg, starts, rates, ok, sec)
+        assert len(one) == len(many) and list(one._groups) == list(many._groups)
+        for prefix, group in one._groups.items():
+            other = many._groups[prefix]
+            assert list(group) == list(other)
+            for key, entry in group.items():
+                got = other[key]
+                assert len(entry) == len(got) and entry[1] == got[1]
+                assert all(a.tobytes() == b.tobytes() and a.shape == b.shape
+                           for a, b in zip(entry[:1] + entry[2:], got[:1] + got[2:]))

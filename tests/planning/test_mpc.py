@@ -237,6 +237,39 @@ def test_motions_fitted_together_are_fitted_as_each_alone():
         envelope.fit_envelope_many([motions[1], forbidden], device, 0.15)
 
 
+def _same_fit(a, b):
+    (ma, sa), (mb, sb) = a, b
+    return (sa == sb and ma.name == mb.name and ma.frequency_hz == mb.frequency_hz
+            and all(x.tobytes() == y.tobytes() for x, y in ((ma.k, mb.k), (ma.amplitude, mb.amplitude),
+                                                             (ma.phase, mb.phase))))
+
+
+def test_fits_remembered_checks_give_the_fits_of_fresh_ones():
+    # fit_envelope_many remembers one-harmonic motions' checker reports and corrected ratios by their
+    # exact arrays: fitting again (the motion a step chose, an earlier fit's scaled output, motions in
+    # other groups) gives bit for bit what fitting with nothing remembered gives.
+    device = default_device_config()
+    tol = envelope.PlantTolerance()
+    big = PlateMotion.single(30.0, [30.0, 0, 10.0, 0, 200.0, 0], [0, 0, math.pi / 2, 0, -math.pi / 2, 0])
+    sink = PlateMotion.single(30.0, [16.0, 19.0, 1.2, 33.0, 28.0, 107.0], [0.1, 1.5, 1.0, 2.9, -0.4, 1.6])
+    two = PlateMotion(30.0, np.array([1, 2]), np.array([[16.0, 19.0, 1.2, 33.0, 28.0, 107.0], [3.0] * 6]),
+                      np.zeros((2, 6)), name="two")
+    motions = [big, sink.scaled(3.0), big.scaled(0.05), two.scaled(2.0)]
+
+    def fresh(ms):
+        envelope._CHECKED.clear()
+        envelope._ROBUST.clear()
+        return [envelope.fit_envelope(m, device, 0.15, tolerance=tol) for m in ms]
+
+    first = envelope.fit_envelope_many(motions, device, 0.15, tolerance=tol)
+    assert envelope._CHECKED and envelope._ROBUST   # (the two-harmonic motion's report is not kept)
+    outputs = [m for m, _ in first]
+    again = envelope.fit_envelope_many(motions[::-1] + outputs, device, 0.15, tolerance=tol)
+    expect = fresh(motions[::-1] + outputs)
+    assert all(_same_fit(a, b) for a, b in zip(again, expect))
+    assert all(_same_fit(a, b) for a, b in zip(first, fresh(motions)))
+
+
 def test_fits_asked_together_survive_the_fit_cache_clearing_itself():
     # Regression (a benchmark run died with a KeyError): when a step's ranked candidates mix a cached fit
     # with new ones and the cache is full, it is cleared before the new fits go in; the cached one must

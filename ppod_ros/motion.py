@@ -95,14 +95,17 @@ class PlateMotion:
             last = kk
         if K and not (np.isfinite(amp).all() and np.isfinite(ph).all() and (amp >= 0.0).all()):
             return False
-        k, amp, ph = k.copy(), amp.copy(), ph.copy()
+        self._set_arrays(f, k.copy(), amp.copy(), ph.copy())
+        return True
+
+    def _set_arrays(self, f: float, k: np.ndarray, amp: np.ndarray, ph: np.ndarray) -> None:
+        """Store checked, owned arrays read-only (and the frequency as a float)."""
         for arr in (k, amp, ph):
             arr.setflags(write=False)
         object.__setattr__(self, "frequency_hz", float(f))
         object.__setattr__(self, "k", k)
         object.__setattr__(self, "amplitude", amp)
         object.__setattr__(self, "phase", ph)
-        return True
 
     def _init_validated(self) -> None:
         """Validate and normalise any input (the MOTION.yaml rules); ConfigError naming the field."""
@@ -129,15 +132,7 @@ class PlateMotion:
         if not isinstance(self.name, str):
             raise ConfigError(f"name: expected a string, got {self.name!r}")
         order = np.argsort(k)
-        amp = np.array(amp[order], dtype=float)
-        ph = np.array(ph[order], dtype=float)
-        k = np.array(k[order])
-        for arr in (k, amp, ph):
-            arr.setflags(write=False)
-        object.__setattr__(self, "frequency_hz", float(f))
-        object.__setattr__(self, "k", k)
-        object.__setattr__(self, "amplitude", amp)
-        object.__setattr__(self, "phase", ph)
+        self._set_arrays(f, np.array(k[order]), np.array(amp[order], dtype=float), np.array(ph[order], dtype=float))
 
     # ------------------------------------------------------------------ construction
     @classmethod

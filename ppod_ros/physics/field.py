@@ -239,25 +239,11 @@ class WarmStarts:
               ok: np.ndarray, secants: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
         """Keep the converged (``ok``) rows' starts and rates, and their own map's secant differences
         ``secants`` = (dx, dF (N, rows, dim), count (N,)) where counted (else those stored before)."""
-        with self._lock:
-            group = self._groups.setdefault(prefix, {})
-            self._groups.move_to_end(prefix)
-            before = len(group)
-            for i, (row, x, r, good) in enumerate(zip(configs, starts, rates, ok)):
-                if not good:
-                    continue
-                key = row.tobytes()
-                entry = (x.copy(), float(r))
-                k = 0 if secants is None else int(secants[2][i])
-                if k > 0:  # one small array per entry: (2, k, dim)
-                    entry += (np.stack([secants[0][i, :k], secants[1][i, :k]]),)
-                elif key in group and len(group[key]) > 2:
-                    entry += group[key][2:]
-                group[key] = entry
-            self._count += len(group) - before
-            while self._count > self.max_entries and len(self._groups) > 1:
-                _, old = self._groups.popitem(last=False)
-                self._count -= len(old)
+        if secants is None:
+            one = (None, None, np.zeros((1, len(configs)), np.int64))
+        else:
+            one = (secants[0][None], secants[1][None], np.asarray(secants[2])[None])
+        self.store_all(prefix, configs, starts[None], np.asarray(rates)[None], np.asarray(ok, bool)[None], one)
 
     def store_all(self, prefix: tuple, configs: np.ndarray, starts: np.ndarray, rates: np.ndarray,
                   ok: np.ndarray, secants: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
@@ -279,7 +265,7 @@ class WarmStarts:
                 m = good[-1]
                 entry = (starts[m, i].copy(), float(rates[m, i]))
                 with_secants = np.flatnonzero(counted[:, i])
-                if with_secants.size:
+                if with_secants.size:  # one small array per entry: (2, k, dim)
                     j = with_secants[-1]
                     k = int(secants[2][j, i])
                     entry += (np.stack([secants[0][j, i, :k], secants[1][j, i, :k]]),)

@@ -68,10 +68,11 @@ class MpcSettings:
     approach_per_s: float = 0.8           # waypoint: this fraction of the error per horizon second
     frequency_hz: float = DEFAULT_FREQUENCY_HZ  # of the searched motions
     harmonics: int = 1                    # 1: 12 real inputs; 2: 24 (the Gauss-Newton search's)
-    two_harmonics_from_parts: int = 3     # ... and 2 whenever at least this many parts are commanded (0: never):
+    two_harmonics_from_parts: int = 2     # ... and 2 whenever at least this many parts are commanded (0: never):
                                           # a one-frequency field is near linear, 6 coefficients for three
                                           # parts' 6 velocities and more; two frequencies reach more fields
-                                          # (docs/planner.md, "Measured")
+                                          # (bracket and washer, benchmark scenes 0-19: 20/20 against 18/20;
+                                          # three parts 20/20 against 19/20; docs/planner.md, "Measured")
     headroom: float = 0.15                # fraction under every device limit
     plant_tolerance: PlantTolerance | None = PlantTolerance()  # actuator errors whose corrected tables must
                                           # pass the checker too (planning/envelope.py); None: nominal only

@@ -65,7 +65,7 @@ def test_bracket_with_unknown_friction_reaches_pose_and_is_held_at_rest():
 
 @pytest.mark.parametrize("two_from", [0, 3])
 def test_three_parts_to_three_goals_at_once(two_from):
-    # Over one frequency (two_harmonics_from_parts 0) and over two (3, the default for three parts).
+    # Over one frequency (two_harmonics_from_parts 0) and over two (from 3 parts; the default is 2).
     bracket = published_rigid_part()
     washer = PointPart(0.3)
     model = [bracket, washer, washer]
@@ -895,10 +895,10 @@ def test_a_replanning_step_within_the_dwell_solves_only_the_motion_playing(monke
     assert len(set().union(*solved)) > 5
 
 
-def test_three_parts_or_more_are_planned_over_two_frequencies(monkeypatch):
+def test_several_parts_are_planned_over_two_frequencies(monkeypatch):
     # A one-frequency field is near linear: 6 coefficients for three parts' six velocities, and no
-    # room for a fourth part or a turn. The search runs over two harmonics (24 inputs) from three
-    # commanded parts on (MpcSettings.two_harmonics_from_parts), over one below.
+    # room for a fourth part or a turn. The search runs over two harmonics (24 inputs) from two
+    # commanded parts on (MpcSettings.two_harmonics_from_parts), over one for a part alone.
     from ppod_ros.planning import mpc
 
     seen = []
@@ -912,16 +912,19 @@ def test_three_parts_or_more_are_planned_over_two_frequencies(monkeypatch):
     washer = PointPart(0.3)
     goals = [PartGoal(0, 0.03, 0.0), PartGoal(1, -0.03, 0.0), PartGoal(2, 0.0, 0.03)]
     starts = [[0.0, -0.03, 0.0], [0.03, 0.03, 0.0], [-0.03, -0.01, 0.0]]
-    three = MultiTask([washer] * 3, goals, timeout_s=30.0)
-    assert three.harmonics == 2
-    assert three.step(0.0, starts).motion is not None
-    assert max(seen) == 2                       # the probes reach the second harmonic
+    for n in (2, 3):
+        seen.clear()
+        task = MultiTask([washer] * n, goals[:n], timeout_s=30.0)
+        assert task.harmonics == 2
+        assert task.step(0.0, starts[:n]).motion is not None
+        assert max(seen) == 2                   # the probes reach the second harmonic
     seen.clear()
-    two = MultiTask([washer] * 2, goals[:2], timeout_s=30.0)
-    assert two.harmonics == 1
-    assert two.step(0.0, starts[:2]).motion is not None
+    one = MultiTask([washer], goals[:1], timeout_s=30.0)
+    assert one.harmonics == 1
+    assert one.step(0.0, starts[:1]).motion is not None
     assert max(seen) == 1
     assert MultiTask([washer] * 3, goals, settings=MpcSettings(two_harmonics_from_parts=0)).harmonics == 1
-    assert MultiTask([washer] * 2, goals[:2], settings=MpcSettings(harmonics=2)).harmonics == 2
+    assert MultiTask([washer] * 2, goals[:2], settings=MpcSettings(two_harmonics_from_parts=3)).harmonics == 1
+    assert MultiTask([washer], goals[:1], settings=MpcSettings(harmonics=2)).harmonics == 2
     with pytest.raises(ConfigError, match="two_harmonics_from_parts"):
         MpcSettings(two_harmonics_from_parts=-1)

@@ -687,7 +687,6 @@ class MultiTask:
         self._held_at: bytes | None = None  # the poses (memo key) where the last prediction was held
         self.held_predictions = 0          # replanning steps that held the motion playing's last prediction
         self._fits: dict[bytes, PlateMotion] = {}
-        self._budgets: dict[tuple[int, int], object] = {}   # budgeted solver settings by their caps
         self._memo_poses: bytes | None = None
         self._gave_up_at: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # fitted candidate's name: (the commanded
                                           # rows it gave up at, their poses) where the solver last gave up on it
@@ -1482,23 +1481,12 @@ class MultiTask:
         s = self.settings
         if not (s.probe_max_periods or s.probe_max_steps_per_period):
             return None
-        return self._budgeted(s.probe_max_periods, s.probe_max_steps_per_period)
+        return budgeted(s.probe_max_periods, s.probe_max_steps_per_period)
 
     def _gave_up_solver(self):
         """The solver settings of fitted candidates the solver gave up on nearby (``_suspects``)."""
         s = self.settings
-        return self._budgeted(s.gave_up_max_periods, s.gave_up_max_steps_per_period)
-
-    def _budgeted(self, max_periods: int, max_steps_per_period: int):
-        """``budgeted(max_periods, max_steps_per_period)``, made once per pair of caps (the solver
-        derives its keys and settings vector once per settings object)."""
-        key = (max_periods, max_steps_per_period)
-        if type(max_periods) is not int or type(max_steps_per_period) is not int:
-            return budgeted(max_periods, max_steps_per_period)   # (its errors)
-        out = self._budgets.get(key)
-        if out is None:
-            out = self._budgets[key] = budgeted(max_periods, max_steps_per_period)
-        return out
+        return budgeted(s.gave_up_max_periods, s.gave_up_max_steps_per_period)
 
     def _refine(self, start: PlateMotion, poses, statuses) -> tuple[PlateMotion | None, float]:
         """Gauss-Newton steps from ``start``: finite-difference probes and line-search trials solved on

@@ -19,6 +19,7 @@ caps: ``SolverSettings.warm_key``).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import lru_cache
 
 import numpy as np
 
@@ -40,10 +41,16 @@ def budgeted(max_periods: int, max_steps_per_period: int,
     deterministic bound on the solver's work per row. A row that converges within the budget gives
     the same result as without it from the same start; one that does not is invalid ("not
     converged"). Budgeted calls share the warm starts of unbudgeted ones (``SolverSettings.warm_key``)."""
-    base = settings or PLANNER_SOLVER
     for name, v in (("max_periods", max_periods), ("max_steps_per_period", max_steps_per_period)):
         if not (isinstance(v, int) and v >= 0):
             raise ConfigError(f"{name}: expected an integer >= 0 (0: unchanged), got {v!r}")
+    return _capped(settings or PLANNER_SOLVER, max_periods, max_steps_per_period)
+
+
+@lru_cache(maxsize=32)
+def _capped(base: SolverSettings, max_periods: int, max_steps_per_period: int) -> SolverSettings:
+    """:func:`budgeted`'s settings, made once per base and caps (the solver derives its keys and
+    settings vector once per settings object; the planner asks for the same budget every step)."""
     return base.replace(max_periods=min(base.max_periods, max_periods or base.max_periods),
                         max_steps_per_period=min(base.max_steps_per_period,
                                                  max_steps_per_period or base.max_steps_per_period))

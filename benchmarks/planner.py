@@ -43,6 +43,8 @@ examples:
   ppod bench planner --sections design physics --out out/bench
   ppod bench planner --sections multipart --counts 1 3 --scenes 20
   ppod bench planner --sections multipart --counts 1 --scenes 20 --only-scenes 2 16 --planners mpc
+  ppod bench planner --sections multipart --counts 1 3 --scenes 20 --seed 1 --planners mpc
+  ppod bench planner --sections multipart --counts 3 --scenes 20 --plan-latency 0.3 --planners mpc
 """
 
 from __future__ import annotations
@@ -77,8 +79,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--only-scenes", nargs="+", type=int, default=None, metavar="N",
                         help="multipart: run only these scene numbers (0-based; the scenes are the same as in "
                              "the full run)")
+    parser.add_argument("--plan-latency", type=float, default=0.0, metavar="S",
+                        help="multipart: a motion the planner searched for plays this long (whole 0.1 s frames) "
+                             "after the frame it was planned on, as in the running stack while the planner thinks "
+                             "(default 0; a stop plays at once)")
     parser.add_argument("--quick", action="store_true", help="fewer designs, starts and seconds")
-    parser.add_argument("--seed", type=int, default=0, help="tracker-noise seed (default 0)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the tracker noise and of the multipart scenes (default 0; the planner's "
+                             "settings were tuned on seed 0's scenes: another seed draws scenes it has not seen)")
 
 
 def _starts(n: int) -> list[list[float]]:
@@ -305,7 +313,9 @@ def _switch_deviations(records: list, run, goals, first: int | None = None) -> l
     for k, rec in enumerate(records):
         if k not in keep:
             continue
-        ts = rec["t_s"]
+        # From when the motion started playing (its frame, or later under --plan-latency: the run's
+        # switch times are one per returned motion, in order; the last may not have played).
+        ts = run.switch_times[k] if k < len(run.switch_times) else rec["t_s"]
         te = records[k + 1]["t_s"] if k + 1 < len(records) else ts + rec["ramp_s"] + 0.5
         te = min(te, ts + rec["ramp_s"] + 1.0)
         i0 = int(np.searchsorted(times, ts - 1e-9))
@@ -341,7 +351,7 @@ def multipart_models() -> tuple[dict, dict]:
 
 def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float,
                     planners: tuple[str, ...] = ("mpc", "template"),
-                    only: list[int] | None = None) -> tuple[list[dict], list]:
+                    only: list[int] | None = None, plan_latency_s: float = 0.0) -> tuple[list[dict], list]:
     import multiprocessing
 
     from ppod_ros.planning import Task
@@ -394,7 +404,7 @@ def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float,
                     run = run_on_dynamics(task, true_parts, sc["starts"], horizon_s=scene_s + 1.0, ramp_s=0.5,
                                           latency_s=0.1, plant=plant,
                                           separate=_separation(scene_parts), seed=sc["plant_seed"] % 1000,
-                                          keep_steps=True)
+                                          keep_steps=True, command_latency_s=plan_latency_s)
                     wall = time.perf_counter() - w0
                     commanded = goals if planner == "mpc" else goals[:1]
                     final = run.configurations
@@ -458,7 +468,7 @@ def run(args: argparse.Namespace) -> int:
         result["multipart"], paths["multipart"] = bench_multipart(
             list(getattr(args, "counts", [1, 2, 3, 4])), int(getattr(args, "scenes", 2)), args.seed,
             float(getattr(args, "scene_seconds", 60.0)), tuple(getattr(args, "planners", ("mpc", "template"))),
-            getattr(args, "only_scenes", None))
+            getattr(args, "only_scenes", None), float(getattr(args, "plan_latency", 0.0)))
     if "physics" in args.sections:
         print("Parts physics of the simulated device (no device process, ROS or camera), sink at the centre:")
         result["physics"] = bench_physics(args.quick)

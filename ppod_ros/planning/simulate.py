@@ -220,15 +220,28 @@ class SimulatedRun:
     switch_times: tuple[float, ...] = ()      # device time of each motion switch
 
 
+def _searched(task, step) -> bool:
+    """The step's motion came from a search (the planning time the stack pays before it plays)."""
+    searched = getattr(task, "plan_searched", None)
+    if searched is None:
+        return True
+    return bool(step.plan_ms > 0 and searched and searched[-1])
+
+
 def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | RigidPart], starts, *,
                     horizon_s: float = 60.0, dt_s: float = 0.1, position_noise_m: float = 5e-5,
                     angle_noise_rad: float = math.radians(0.1), seed: int = 0, latency_s: float = 0.0,
                     ramp_s: float = 0.0, plant: PlantError | ActuatorPlantError | None = None,
                     separate: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
-                    keep_steps: bool = False) -> SimulatedRun:
+                    keep_steps: bool = False, command_latency_s: float = 0.0) -> SimulatedRun:
     """Step ``task`` every ``dt_s`` on the parts' poses until it ends or ``horizon_s`` passes.
     A SensorlessTask is shown no poses. ``separate(configurations, twists)`` modifies both in
-    place and returns the indices it moved."""
+    place and returns the indices it moved. ``command_latency_s``: a motion the task returns from a
+    search (a MultiTask step that searched its candidates; every motion of another task) starts
+    playing this long (whole frames) after the frame it was planned on, as in the running stack
+    where the field planner node publishes it when its planning thread is done; the frames in
+    between are not stepped (the node skips them). A stop takes a MultiTask a few ms: it plays at
+    once."""
     rng = np.random.default_rng(seed)
     dyn = PartDynamics(list(parts), np.array(starts, dtype=float))
     sensorless = isinstance(task, SensorlessTask)
@@ -236,6 +249,8 @@ def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | Rig
     previous, switched_at = None, 0.0
     path, times, steps, switches = [], [], [], []
     lag = max(0, int(round(latency_s / dt_s)))
+    command_lag = max(0, int(round(command_latency_s / dt_s)))
+    pending: tuple[float, object] | None = None   # (when it plays, the motion) under command_latency_s
     while t < horizon_s + 1e-9:
         path.append(dyn.state.configurations)
         times.append(t)
@@ -244,14 +259,26 @@ def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | Rig
             poses = path[max(0, len(path) - 1 - lag)].copy()
             poses[:, :2] += rng.normal(0.0, position_noise_m, (len(parts), 2))
             poses[:, 2] += rng.normal(0.0, angle_noise_rad, len(parts))
-        step = task.step(t, poses)
-        if keep_steps:
-            steps.append(step)
-        if step.motion is not None:
+        new = None
+        if pending is not None:
+            if t >= pending[0] - 1e-9:
+                new, pending = pending[1], None
+        else:
+            step = task.step(t, poses)
+            if keep_steps:
+                steps.append(step)
+            if step.motion is not None:
+                if command_lag and _searched(task, step):
+                    pending = (t + command_lag * dt_s, step.motion)
+                else:
+                    new = step.motion
+        if new is not None:
+            if motion is None and dyn.time_s != t:   # the first motion plays late: the parts rested till now
+                dyn = PartDynamics(list(parts), dyn.state.configurations, time_s=t)
             r = _ramp(motion, ramp_s)
             previous = _blend(previous, motion, min(1.0, (t - switched_at) / r)) if r > 0 and motion \
                 is not None else motion
-            motion, motions, switched_at = step.motion, motions + 1, t
+            motion, motions, switched_at = new, motions + 1, t
             switches.append(t)
         if step.done or step.failed_reason:
             break

@@ -928,3 +928,29 @@ def test_several_parts_are_planned_over_two_frequencies(monkeypatch):
     assert MultiTask([washer], goals[:1], settings=MpcSettings(harmonics=2)).harmonics == 2
     with pytest.raises(ConfigError, match="two_harmonics_from_parts"):
         MpcSettings(two_harmonics_from_parts=-1)
+
+
+def test_the_closed_loop_can_play_each_searched_motion_after_the_planning_time():
+    # run_on_dynamics(command_latency_s=...) plays every motion a search returned whole frames after
+    # the frame it was planned on and skips the frames in between (as the field planner node does
+    # while its planning thread thinks); a stop costs no search and plays at once.
+    model = published_rigid_part()
+    task = MultiTask([model], [PartGoal(0, 0.02, -0.02, 0.0)], timeout_s=20.0)
+    calls, step = [], task.step
+
+    def recorded(t, poses):
+        out = step(t, poses)
+        calls.append((t, out.motion))
+        return out
+
+    task.step = recorded
+    run = run_on_dynamics(task, [model], [[0.03, -0.03, 0.3]], horizon_s=20.0, ramp_s=0.5, latency_s=0.1,
+                          seed=1, command_latency_s=0.3)
+    assert run.step.done, run.step.text
+    returned = [(t, m) for t, m in calls if m is not None]
+    assert len(returned) == len(run.switch_times) >= 2 and returned[-1][1].is_zero()
+    for (t_frame, motion), t_play in zip(returned, run.switch_times):
+        assert t_play - t_frame == pytest.approx(0.0 if motion.is_zero() else 0.3)
+    # No step in the frames a searched motion waited to play, its own included (three per delayed one).
+    delayed = sum(not m.is_zero() for _t, m in returned)
+    assert len(calls) == len(run.times) - 1 - 3 * delayed

@@ -302,8 +302,8 @@ def _busy(deadline: float) -> None:
 
 def _switch_deviations(records: list, run, goals, first: int | None = None) -> list[float]:
     """Per commanded part: the worst distance of its true path from the predicted one over each
-    switch (from the switch to the next replanning after the ramp). ``first``: over the first this
-    many switches only (negative: all but the first -first)."""
+    switch (from when the motion started playing to when the next one did, at most the ramp plus
+    1 s). ``first``: over the first this many switches only (negative: all but the first -first)."""
     from ppod_ros.planning.mpc import ramped_displacement
 
     times, traj = run.times, run.trajectory
@@ -316,7 +316,8 @@ def _switch_deviations(records: list, run, goals, first: int | None = None) -> l
         # From when the motion started playing (its frame, or later under --plan-latency: the run's
         # switch times are one per returned motion, in order; the last may not have played).
         ts = run.switch_times[k] if k < len(run.switch_times) else rec["t_s"]
-        te = records[k + 1]["t_s"] if k + 1 < len(records) else ts + rec["ramp_s"] + 0.5
+        te = (run.switch_times[k + 1] if k + 1 < len(run.switch_times)
+              else records[k + 1]["t_s"] if k + 1 < len(records) else ts + rec["ramp_s"] + 0.5)
         te = min(te, ts + rec["ramp_s"] + 1.0)
         i0 = int(np.searchsorted(times, ts - 1e-9))
         for row in range(i0 + 1, len(times)):

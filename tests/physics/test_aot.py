@@ -125,6 +125,26 @@ def test_the_key_follows_the_kernel_sources_and_a_stale_module_is_not_used(aot_k
     assert _aot.module_path(other) is None
 
 
+def test_a_build_first_drops_numbas_cache_of_changed_kernel_sources(monkeypatch, tmp_path):
+    # Regression: numba checks a cached function against its own file only, and the module is
+    # compiled from the cached callees. Built without a JIT call before it, after an edit of
+    # _contact.py, the module linked the old _contact code (a stick test made to fail everywhere
+    # left every planner row as it was) and was stored under the new sources' key.
+    from ppod_ros.physics import _params
+
+    order = []
+    monkeypatch.setattr(_params, "_drop_stale_cache", lambda: order.append("drop stale cache"))
+
+    def stop():
+        order.append("compile")
+        raise RuntimeError("stop before compiling")
+
+    monkeypatch.setattr(_jit, "materialise", stop)
+    with pytest.raises(RuntimeError, match="stop before compiling"):
+        _aot.build(out_dir=tmp_path)
+    assert order == ["drop stale cache", "compile"]
+
+
 def test_disabled_or_missing_module_gives_no_kernel(monkeypatch):
     monkeypatch.setenv(_aot.ENV_SWITCH, "0")
     assert _aot.kernel() is None

@@ -10,7 +10,9 @@ with ``interface: remote``).
 
 from __future__ import annotations
 
+import errno
 import logging
+import sys
 import threading
 
 from can_remote import RemoteServer
@@ -20,6 +22,24 @@ from ppod_ros.errors import DeviceError
 log = logging.getLogger(__name__)
 
 LOOPBACK = "127.0.0.1"
+
+#: A client that went away while its connection was being written or closed (a node stopping
+#: before the simulator): its end of the session, not an error of the server.
+_PEER_GONE = (BrokenPipeError, ConnectionResetError, ConnectionAbortedError)
+
+
+class _Server(RemoteServer):
+    """``RemoteServer`` that logs a client gone at close at debug level. socketserver prints the
+    traceback of any exception in a request thread to stderr; at a stack's shutdown the handler of a
+    node that had already stopped raised ``BrokenPipeError`` sending the WebSocket close and
+    ``OSError(ENOTCONN)`` shutting the socket down, and that traceback reached the stack's log."""
+
+    def handle_error(self, request, client_address) -> None:
+        exc = sys.exc_info()[1]
+        if isinstance(exc, _PEER_GONE) or (isinstance(exc, OSError) and exc.errno == errno.ENOTCONN):
+            log.debug("CAN bridge: client %s left before its connection was closed (%s)", client_address, exc)
+            return
+        super().handle_error(request, client_address)
 
 
 class Bridge:
@@ -35,7 +55,7 @@ class Bridge:
 
     def __init__(self, channel: str, port: int = 0):
         try:
-            self.server = RemoteServer(host=LOOPBACK, port=int(port), channel=channel, interface="virtual")
+            self.server = _Server(host=LOOPBACK, port=int(port), channel=channel, interface="virtual")
         except OSError as exc:
             raise DeviceError(
                 f"cannot serve the CAN bridge on {LOOPBACK}:{port}: {exc.strerror or exc}"

@@ -190,14 +190,9 @@ def build(out_dir: Path | None = None, verbose: bool = False) -> Path:
     k = key()
     if k is None:
         raise RuntimeError("ahead-of-time kernel: this platform's CPU is unknown (no /proc/cpuinfo)")
-    from ppod_ros.physics import _jit, _params
+    from ppod_ros.physics import _jit
 
-    # numba validates each cached function against its own source file only; the exported kernel
-    # is compiled from the cached callees, so after an edit of one kernel module a build without
-    # this (e.g. ``python -m ppod_ros.physics._aot`` before any JIT call) linked the old code of the
-    # others and stored it under the new sources' key: a stale kernel taken for an up-to-date one.
-    _params._drop_stale_cache()
-    _jit.materialise()
+    _jit.materialise()   # drops numba's cache of changed kernel sources first (_params._drop_stale_cache)
     from ppod_ros.physics import _solve
 
     with warnings.catch_warnings():

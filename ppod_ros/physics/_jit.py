@@ -98,8 +98,14 @@ def materialise() -> None:
     with _lock:
         if _done:
             return
-        from ppod_ros.physics import _numba_start
+        from ppod_ros.physics import _numba_start, _params
 
+        # numba checks a cached function against its own source file only, and callers are
+        # compiled with (or linked from) their callees' cached code: after an edit of one kernel
+        # module, code from the old version could load silently (the ahead-of-time build, run
+        # before any JIT call, linked the old sticking test under the new sources' key). Every
+        # dispatcher is made here, so the package's cache is checked here, once per process.
+        _params._drop_stale_cache()
         _numba_start.prepare()
         import numba
 

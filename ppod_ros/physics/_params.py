@@ -86,23 +86,19 @@ def rigid_rows(part: RigidPart, configs: np.ndarray, eps_mps: float, evolve: boo
 #: Every kernel: (family, part kind, parallel). "field": the asymptotic solver; "dyn": full dynamics.
 ALL_KERNELS = tuple((fam, kind, par) for fam in ("field", "dyn") for kind in (0, 1) for par in (False, True))
 _warmed: set[tuple[str, int, bool]] = set()
-_stale_checked = False
 
 
 def ensure_compiled(*kernels: tuple[str, int, bool]) -> float:
     """Compile or load the given kernels (default: all) once per process; returns the seconds that
     took (0 when they were ready). Loading only what a call uses keeps small CLI calls short."""
-    global _setup_seconds, _stale_checked
+    global _setup_seconds
     want = kernels or ALL_KERNELS
     with _lock:
         todo = [k for k in want if k not in _warmed]
         if not todo:
             return 0.0
         t0 = time.perf_counter()
-        if not _stale_checked:
-            _drop_stale_cache()
-            _stale_checked = True
-        _warm_up(todo)
+        _warm_up(todo)   # the first kernel call materialises them, dropping stale cache entries first
         _warmed.update(todo)
         spent = time.perf_counter() - t0
         _setup_seconds = (_setup_seconds or 0.0) + spent

@@ -125,24 +125,24 @@ def test_the_key_follows_the_kernel_sources_and_a_stale_module_is_not_used(aot_k
     assert _aot.module_path(other) is None
 
 
-def test_a_build_first_drops_numbas_cache_of_changed_kernel_sources(monkeypatch, tmp_path):
-    # Regression: numba checks a cached function against its own file only, and the module is
-    # compiled from the cached callees. Built without a JIT call before it, after an edit of
-    # _contact.py, the module linked the old _contact code (a stick test made to fail everywhere
-    # left every planner row as it was) and was stored under the new sources' key.
-    from ppod_ros.physics import _params
-
-    order = []
-    monkeypatch.setattr(_params, "_drop_stale_cache", lambda: order.append("drop stale cache"))
-
-    def stop():
-        order.append("compile")
-        raise RuntimeError("stop before compiling")
-
-    monkeypatch.setattr(_jit, "materialise", stop)
-    with pytest.raises(RuntimeError, match="stop before compiling"):
-        _aot.build(out_dir=tmp_path)
-    assert order == ["drop stale cache", "compile"]
+def test_numbas_cache_of_changed_kernel_sources_is_dropped_before_any_dispatcher_is_made():
+    # Regression: numba checks a cached function against its own file only, and the ahead-of-time
+    # module is compiled from the cached callees. Built without a JIT call before it, after an edit
+    # of _contact.py, the module linked the old _contact code (a stick test made to fail everywhere
+    # left every planner row as it was) and was stored under the new sources' key. Every JIT path
+    # (the build, ensure_compiled, cycle.limit_cycle's direct kernel calls) makes its dispatchers in
+    # _jit.materialise, which checks the cache first: in a fresh process, before numba's dispatchers.
+    code = (
+        "from ppod_ros.physics import _jit, _params, _aot, _contact\n"
+        "seen = []\n"
+        "_params._drop_stale_cache = lambda: seen.append(_jit.is_materialised())\n"
+        "assert not _jit.is_materialised()\n"
+        "_jit.materialise()\n"
+        "_jit.materialise()\n"
+        "print(seen, type(_contact.stick_ratio).__name__)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["[False]", "CPUDispatcher"]   # once, before the dispatchers
 
 
 def test_disabled_or_missing_module_gives_no_kernel(monkeypatch):

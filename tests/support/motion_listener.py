@@ -1,4 +1,7 @@
-"""Test node: a plain (non-lifecycle) node that counts PlateMotion messages and logs each tenth."""
+"""Test node: a plain (non-lifecycle) node that counts PlateMotion messages and logs each tenth.
+
+Tests wait for a count ("11 so far"), never for a message name: discovery may miss the first few.
+"""
 
 from __future__ import annotations
 

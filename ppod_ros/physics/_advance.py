@@ -270,7 +270,7 @@ def rigid_try_stick(mc, P, aux, t, y, W, capture):
     if umax > max(capture * P[RP_EPS], P[RP_ZTOL]):
         return False
     fx, fy, tz, nmin = stick_forces(P, sx, sy, W, W_U)
-    if nmin <= 0.0 or stick_ratio(P, fx, fy, tz, W) > 1.0:
+    if nmin <= 0.0 or stick_ratio(P, fx, fy, tz, W, True) > 1.0:
         return False
     aux[AX_MODE] = STICK
     vx, vy, wz = plate_twist(sx, sy, W)
@@ -314,7 +314,7 @@ def event_value(kind, mc, P, aux, t, y, W):
     fx, fy, tz, nmin = stick_forces(P, sx, sy, W, W_U)
     if nmin <= 0.0:
         return -1.0
-    return 1.0 - stick_ratio(P, fx, fy, tz, W)
+    return 1.0 - stick_ratio(P, fx, fy, tz, W, False)
 
 
 @njit(cache=True, error_model="numpy")

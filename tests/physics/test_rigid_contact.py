@@ -130,7 +130,7 @@ def test_the_sticking_test_finds_the_best_force_distribution():
         P, W = _setup(part, 0.5, u, np.zeros(6))
         fx, fy, tz, nmin = stick_forces(P, 0.01, -0.02, W, lay.W_U)
         assert nmin > 0
-        ratio = stick_ratio(P, fx, fy, tz, W)
+        ratio = stick_ratio(P, fx, fy, tz, W, False)
         cap = part.mu_static * W[lay.W_N:lay.W_N + 3]
         rho = np.column_stack([W[lay.W_RX:lay.W_RX + 3], W[lay.W_RY:lay.W_RY + 3]])
         ref = _best_ratio(rho, cap, [fx, fy, tz], rng)
@@ -140,3 +140,30 @@ def test_the_sticking_test_finds_the_best_force_distribution():
             assert ref > 1.0 - 1e-6 and ratio <= ref * (1 + 2e-3)
         else:                   # solved exactly (the break-away test needs it precisely near 1)
             assert ratio == pytest.approx(ref, rel=2e-3)
+
+
+def test_the_sticking_decision_stops_early_on_the_same_side_of_one_as_the_exact_ratio():
+    """decide=True (the test after each step) may stop as soon as the side of 1 is certain; it must
+    agree with the exact ratio there, also within 1e-9 of 1, and bound it from the right side."""
+    part = RigidPart(0.0216, [1.084e-5, 0.123e-5, 1.20e-5], [[0.01, -0.03, -0.002], [0.0, 0.03, -0.002],
+                                                             [-0.01, -0.03, -0.002]], 0.3)
+    rng = np.random.default_rng(12)
+    checked = 0
+    for _ in range(40):
+        u = rng.normal(scale=[2, 2, 2, 30, 30, 60])
+        P, W = _setup(part, 0.5, u, np.zeros(6))
+        fx, fy, tz, nmin = stick_forces(P, 0.01, -0.02, W, lay.W_U)
+        exact = stick_ratio(P, fx, fy, tz, W, False)
+        if not 0.5 < exact <= 1.0:
+            continue        # outside the cone program (bounds or the least-norm distribution answer)
+        for target in (0.7, 0.999, 1 - 1e-6, 1 - 1e-9, 1 + 1e-9, 1 + 1e-6, 1.001, 1.3):
+            k = target / exact     # the ratio is homogeneous of degree 1 in the required wrench
+            ref = stick_ratio(P, k * fx, k * fy, k * tz, W, False)
+            got = stick_ratio(P, k * fx, k * fy, k * tz, W, True)
+            assert (got <= 1.0) == (ref <= 1.0) == (target < 1.0)
+            if got <= 1.0:
+                assert got >= ref - 1e-12      # a feasible distribution: an upper bound
+            else:
+                assert got <= ref + 1e-12      # certified: a lower bound
+            checked += 1
+    assert checked >= 40

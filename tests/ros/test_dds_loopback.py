@@ -44,7 +44,7 @@ def test_no_dds_packet_leaves_loopback_while_nodes_talk(tmp_path):
             p.kill()
             p.wait(timeout=10)
         pytest.skip(f"tcpdump cannot capture here: {errors.strip()[:200]}")
-    proc = ppod("up", "--config", str(ROOT / "tests" / "support" / "two_nodes.yaml"), "--duration", "4")
+    proc = ppod("up", "--config", str(ROOT / "tests" / "support" / "two_nodes.yaml"), "--duration", "6")
     try:
         proc.wait_for(r"\[motion_listener\].*received talk-\d+ .*; 11 so far", 60)
         assert proc.wait(60) == 0

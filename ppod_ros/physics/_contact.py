@@ -199,7 +199,7 @@ def geometry_for(P, y, W):
     return P[RP_X], P[RP_Y], P[RP_TH]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def gauss_solve(M, mo, b, bo, n):
     """Solve M x = b in place (x replaces b) by elimination with partial pivoting; returns det(M).
 
@@ -520,7 +520,7 @@ def _socp_min_max(gp, Z, start, decide):
 # ================================================================ rigid part: right-hand side
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def rigid_rhs(mc, P, aux, t, y, K, s, W):
     plate_eval(mc, t, W, W_U, W_V)
     sx, sy, _ = geometry_for(P, y, W)

@@ -452,9 +452,9 @@ DECIDE_TB0 = 64.0
 def _socp_min_max(gp, Z, start, decide):
     """min tau s.t. |gp_i + Z_i lambda| <= tau (i = 1..3) by a log barrier (degree 6) and Newton.
 
-    The iterate's tau is always feasible (an upper bound); once centred, tau - 6 / tb is a lower
-    bound. With ``decide`` it returns as soon as tau <= 1, or as soon as twice that gap leaves the
-    lower bound above 1.
+    The iterate's tau is always feasible (an upper bound); once centred (Newton decrement below
+    NEWTON_DEC), tau - 6 / tb is a lower bound. With ``decide`` it returns as soon as tau <= 1, or
+    as soon as, centred, twice that gap leaves the lower bound above 1.
     """
     x = np.zeros(4)
     x[3] = 1.05 * start + 1e-12
@@ -465,6 +465,7 @@ def _socp_min_max(gp, Z, start, decide):
     ds = np.empty(4)
     trial = np.empty(4)
     for _outer in range(40):
+        centred = False
         for _newton in range(50):
             grad[:] = 0.0
             H[:] = 0.0
@@ -496,6 +497,7 @@ def _socp_min_max(gp, Z, start, decide):
             for a in range(4):
                 dec -= grad[a] * step[a]
             if dec < NEWTON_DEC:
+                centred = True
                 break
             f0 = _barrier(gp, Z, x, tb)
             alpha = 1.0
@@ -509,7 +511,7 @@ def _socp_min_max(gp, Z, start, decide):
                 x[a] = trial[a]
             if decide and x[3] <= 1.0:
                 return x[3]
-        if decide and x[3] - 12.0 / tb > 1.0:
+        if decide and centred and x[3] - 12.0 / tb > 1.0:
             return x[3] - 12.0 / tb
         if 6.0 / tb < 1e-11 * max(1.0, x[3]):
             break

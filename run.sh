@@ -89,7 +89,7 @@ ensure_venv() {
   fi
   "$VENV/bin/python" "$ROOT/msgs/build_msgs.py" --quiet
   # The solver's compiled kernels are cached next to their sources; build them once here so that
-  # nodes and tests start warm (a fresh checkout compiles for a minute or two, later runs load).
+  # nodes and tests start warm (a fresh checkout compiles for about three minutes, later runs load).
   "$VENV/bin/python" -c 'from ppod_ros.physics._params import ensure_compiled; import sys
 s = ensure_compiled()
 if s > 5: print(f"[setup] compiled the solver kernels in {s:.0f} s", file=sys.stderr)'

@@ -258,7 +258,7 @@ def contact_velocities(sx, sy, Vx, Vy, wz, W):
     return umax
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def sliding_accelerations(P, aux, sx, sy, Vx, Vy, wz, W, K, s):
     """Twist rates (Ax, Ay, thetaddot) -> K[s, 3:6] while sliding; normal forces -> W[W_N:W_N+3].
 

@@ -65,22 +65,30 @@ def rk_step(kind, mc, P, aux, t, y, h, A, B, C, E, E3, combined, K, reuse_f0, yt
     f(t, y). ``sc`` (n,) are the error scales (0: component not error-controlled).
     """
     status = 0
-    if not reuse_f0:
-        status = max(status, rhs(kind, mc, P, aux, t, y, K, 0, W))
     ns = B.shape[0]
-    for s in range(1, ns):
-        for j in range(n):
-            acc = 0.0
-            for q in range(s):
-                acc += A[s, q] * K[q, j]
-            ytmp[j] = y[j] + h * acc
-        status = max(status, rhs(kind, mc, P, aux, t + C[s] * h, ytmp, K, s, W))
-    for j in range(n):
-        acc = 0.0
-        for q in range(ns):
-            acc += B[q] * K[q, j]
-        ynew[j] = y[j] + h * acc
-    status = max(status, rhs(kind, mc, P, aux, t + h, ynew, K, ns, W))
+    # One call site of the right-hand side (it is inlined: one copy of its body, not three); every
+    # stage's state goes through ytmp, the last also into ynew.
+    for s in range(0 if not reuse_f0 else 1, ns + 1):
+        if s == 0:
+            ts = t
+            for j in range(n):
+                ytmp[j] = y[j]
+        elif s < ns:
+            ts = t + C[s] * h
+            for j in range(n):
+                acc = 0.0
+                for q in range(s):
+                    acc += A[s, q] * K[q, j]
+                ytmp[j] = y[j] + h * acc
+        else:
+            ts = t + h
+            for j in range(n):
+                acc = 0.0
+                for q in range(ns):
+                    acc += B[q] * K[q, j]
+                ynew[j] = y[j] + h * acc
+                ytmp[j] = ynew[j]
+        status = max(status, rhs(kind, mc, P, aux, ts, ytmp, K, s, W))
     if not combined:
         err = 0.0
         for j in range(n):

@@ -13,6 +13,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 
+#: The test listener's log line once it has received 11 messages (tests/support/motion_listener.py).
+#: A count, not a message name: DDS discovery may let the first few messages pass unseen.
+LISTENER_ELEVENTH = r"\[motion_listener\].*received talk-\d+ .*; 11 so far"
+
 
 def process_env(**extra: str) -> dict[str, str]:
     env = dict(os.environ)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.ros.helpers import ROOT, ppod
+from tests.ros.helpers import LISTENER_ELEVENTH, ROOT, ppod
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -46,7 +46,7 @@ def test_no_dds_packet_leaves_loopback_while_nodes_talk(tmp_path):
         pytest.skip(f"tcpdump cannot capture here: {errors.strip()[:200]}")
     proc = ppod("up", "--config", str(ROOT / "tests" / "support" / "two_nodes.yaml"), "--duration", "6")
     try:
-        proc.wait_for(r"\[motion_listener\].*received talk-\d+ .*; 11 so far", 60)
+        proc.wait_for(LISTENER_ELEVENTH, 60)
         assert proc.wait(60) == 0
     finally:
         proc.kill()

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.ros.helpers import ROOT, pid_alive, ppod, wait_gone
+from tests.ros.helpers import LISTENER_ELEVENTH, ROOT, pid_alive, ppod, wait_gone
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 CONFIG = str(ROOT / "tests" / "support" / "two_nodes.yaml")
@@ -21,7 +21,7 @@ def test_sigint_to_the_launcher_stops_every_child_after_they_exchanged_messages(
     proc = ppod("up", "--config", CONFIG)
     try:
         proc.wait_for(r"all nodes up", 60)
-        proc.wait_for(r"\[motion_listener\].*received talk-\d+ .*; 11 so far", 30)
+        proc.wait_for(LISTENER_ELEVENTH, 30)
         pids = _started_pids(proc)
         assert set(pids) == {"motion_listener", "motion_talker"}
         assert all(pid_alive(p) for p in pids.values())

@@ -143,6 +143,12 @@ class SimDevice:
         self.faults = Fault(0)
         self._disabling = False
         self.last_heartbeat_s: float | None = None
+        #: Wall-clock time (``time.time()``) at which that heartbeat reached the device's bus (the
+        #: virtual bus stamps each frame as the bridge delivers it): with :attr:`last_heartbeat_s`
+        #: it tells a host that stopped sending from a simulator that stopped reading (see
+        #: ``ppod_sim.ros_node``'s WATCHDOG log line).
+        self.last_heartbeat_wall_s: float | None = None
+        self._rx_wall_s: float | None = None
         self.cycle_index = 0
         self.tables = TableReceiver.for_device(config)
         self.frames_tx = 0
@@ -211,6 +217,7 @@ class SimDevice:
                 return
             if msg is None:
                 return
+            self._rx_wall_s = msg.timestamp
             rec = self.counters.decode(msg)
             if rec is not None:
                 self._handle(rec)
@@ -221,6 +228,7 @@ class SimDevice:
             self.emergency_stop()
         elif isinstance(rec, Heartbeat):
             self.last_heartbeat_s = now
+            self.last_heartbeat_wall_s = self._rx_wall_s
         elif isinstance(rec, Control):
             self._control(rec)
         elif isinstance(rec, TableHeader):
@@ -259,6 +267,7 @@ class SimDevice:
                 self.faults &= ~Fault.WATCHDOG
                 self._disabling = False
                 self.last_heartbeat_s = now  # the enable itself proves the host is alive
+                self.last_heartbeat_wall_s = self._rx_wall_s
         elif rec.command == Command.DISABLE:
             if self.state in (DeviceState.ENABLED, DeviceState.RAMPING):
                 self._disabling = True
@@ -509,4 +518,21 @@ class SimDevice:
         return None if rec is None else rec.motion()
 
 
-__all__ = ["CycleTruth", "SimDevice", "device_limits"]
+def watchdog_story(device: SimDevice, lag_s: float, wall_now_s: float) -> str:
+    """Where a watchdog trip's heartbeats went, for the log line that reports it.
+
+    The device measures the heartbeat's age in device time, at the periods where it reads its bus.
+    Set beside it: how long ago (wall clock, ``wall_now_s`` from ``time.time()``) the last heartbeat
+    reached the device's bus through the bridge, and how far the device clock ran behind real time
+    (``lag_s``, :attr:`ppod_sim.clock.Pacer.lag_s`). A wall age about as long as the device age
+    means the host stopped sending (or the bridge stopped delivering); a short wall age with a large
+    lag means the simulator read its bus late.
+    """
+    if device.last_heartbeat_wall_s is None:
+        return f"no heartbeat ever reached the bridge; device clock {1e3 * lag_s:.0f} ms behind real time"
+    age_ms = 1e3 * (wall_now_s - device.last_heartbeat_wall_s)
+    return (f"the last heartbeat reached the bridge {age_ms:.0f} ms ago (wall clock); device clock "
+            f"{1e3 * lag_s:.0f} ms behind real time")
+
+
+__all__ = ["CycleTruth", "SimDevice", "device_limits", "watchdog_story"]

@@ -36,10 +36,12 @@ from ppod_nodes.common import qos, topics
 from ppod_nodes.common.convert import phasors_to_msg, seconds_to_stamp
 from ppod_nodes.common.params import Param, declare, read
 from ppod_nodes.common.runner import make_main
+from ppod_ros.can.protocol import DeviceState
 from ppod_ros.device import Mismatch, load_device_config
 from ppod_ros.motion import acceleration_error
 from ppod_ros.vision import CameraConfig
 from ppod_sim.camera import RenderedFrame
+from ppod_sim.device import watchdog_story
 from ppod_sim.scene import load_scene
 from ppod_sim.truth import CycleTruth, save_cycles
 from ppod_sim.world import PartsTruth, SimWorld
@@ -125,10 +127,13 @@ class SimDeviceNode(Node):
             # looks for first after an incident: log them with the heartbeat age in device time.
             last = device.last_heartbeat_s
             before = "" if self._device_state is None else f"{self._device_state.name} -> "
+            why = ""
+            if device.state == DeviceState.WATCHDOG:
+                why = "; " + watchdog_story(device, self.world.process.pacer.lag_s, time.time())
             self.get_logger().info(
                 f"device state {before}"
                 f"{device.state.name} at t={t:.4f} s (last heartbeat at "
-                f"{'never' if last is None else f't={last:.4f} s'}; faults 0x{int(device.faults):x})")
+                f"{'never' if last is None else f't={last:.4f} s'}; faults 0x{int(device.faults):x}{why})")
             self._device_state = device.state
         if t >= self._next_clock:
             self._next_clock = t + self._clock_period

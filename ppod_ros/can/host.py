@@ -150,6 +150,10 @@ class LinkCounters:
     summaries_incomplete: int = 0
     raw_incomplete: int = 0
     unexpected: int = 0
+    #: Heartbeats of the wall-clock thread sent more than two periods after the one before (this
+    #: process starved: the device's watchdog allows three), and the longest interval seen (s).
+    heartbeats_late: int = 0
+    heartbeat_max_interval_s: float = 0.0
     extra: dict = field(default_factory=dict)
 
 
@@ -531,13 +535,30 @@ class DeviceLink:
     def _hb_loop(self) -> None:
         period = self.config.can.heartbeat_period_s
         next_t = time.monotonic()
+        last_sent = None
         while not (self._stop.is_set() or self._hb_stop.is_set()):
+            woke = time.monotonic()
             try:
                 self.heartbeat()
             except DeviceError as exc:
                 log.warning("heartbeat not sent: %s", exc)
-            next_t += period
+            sent = time.monotonic()
+            if last_sent is not None:
+                self._heartbeat_interval(sent - last_sent, woke - next_t, sent - woke, period)
+            last_sent = sent
+            # After a stall, beat on from now rather than send the missed heartbeats in a burst.
+            next_t = max(next_t + period, sent)
             self._hb_stop.wait(max(0.0, next_t - time.monotonic()))
+
+    def _heartbeat_interval(self, interval_s: float, woke_late_s: float, send_s: float, period_s: float) -> None:
+        c = self.counters
+        c.heartbeat_max_interval_s = max(c.heartbeat_max_interval_s, interval_s)
+        if interval_s > 2 * period_s:
+            # Said where it happens: a watchdog trip after it is this host's, not the device's.
+            c.heartbeats_late += 1
+            log.warning("heartbeat sent %.0f ms after the one before (period %.0f ms): the thread woke "
+                        "%.0f ms late and the send took %.0f ms; this process is starved", 1e3 * interval_s,
+                        1e3 * period_s, 1e3 * max(woke_late_s, 0.0), 1e3 * send_s)
 
     def stop(self) -> None:
         """Stop the background threads (the bus stays open: the caller owns it)."""

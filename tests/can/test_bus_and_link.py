@@ -225,3 +225,36 @@ def test_a_bus_off_host_gets_device_errors_and_resumes_after_recovery(config, bu
     link.enable()
     run(device, link, 0.1)
     assert link.status.state == DeviceState.ENABLED
+
+
+class _StallingBus(can.BusABC):
+    """A bus whose third send blocks for ``stall_s`` (the sending process starved in the middle)."""
+
+    def __init__(self, stall_s: float):
+        super().__init__(channel="stall")
+        self.stall_s, self.sends = stall_s, 0
+
+    def send(self, msg, timeout=None):
+        self.sends += 1
+        if self.sends == 3:
+            time.sleep(self.stall_s)
+
+    def _recv_internal(self, timeout):
+        return None, False
+
+
+def test_a_starved_heartbeat_thread_says_so_where_it_happens(config, caplog):
+    """A watchdog trip in a loaded CI run left no sign of which side stalled: the host's heartbeat
+    thread now counts and logs an interval over two periods (the device's watchdog allows three)."""
+    bus = _StallingBus(stall_s=4 * config.can.heartbeat_period_s)
+    link = DeviceLink(bus, config)
+    with caplog.at_level("WARNING", logger="ppod_ros.can.host"):
+        link.start_heartbeat()
+        deadline = time.monotonic() + 5.0
+        while bus.sends < 6 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        link.stop_heartbeat()
+    assert bus.sends >= 6
+    assert link.counters.heartbeats_late == 1
+    assert link.counters.heartbeat_max_interval_s >= 4 * config.can.heartbeat_period_s
+    assert any("this process is starved" in r.getMessage() for r in caplog.records)

@@ -17,7 +17,7 @@ from ppod_ros.can.protocol import Fn, bus_load, split_id
 from ppod_ros.device import Mismatch, default_device_config
 from ppod_ros.errors import ConfigError, LimitError, PpodError
 from ppod_ros.motion import PlateMotion, acceleration_error
-from ppod_sim.device import SimDevice
+from ppod_sim.device import SimDevice, watchdog_story
 from ppod_sim.sensors import SensorErrors
 
 _channels = itertools.count()
@@ -170,6 +170,22 @@ def plate_activity(device, since_s):
         a = rec.accel_samples[keep]
         v.append(np.linalg.norm(a[:, :3], axis=1) + 0.1 * np.linalg.norm(a[:, 3:], axis=1))
     return np.concatenate(t), np.concatenate(v)
+
+
+def test_the_watchdog_log_sets_the_heartbeats_arrival_at_the_bridge_beside_the_device_clocks_lag(rig):
+    """A watchdog trip in a loaded CI run could not be told apart: a host that stopped sending, or a
+    simulator that read its bus late. The device keeps the wall time each heartbeat reached its bus."""
+    r = rig()
+    r.start()
+    before = time.time()
+    r.link.heartbeat()
+    r.device.step()
+    after = time.time()
+    assert before <= r.device.last_heartbeat_wall_s <= after
+    story = watchdog_story(r.device, 0.25, r.device.last_heartbeat_wall_s + 0.157)
+    assert "reached the bridge 157 ms ago" in story and "250 ms behind real time" in story
+    fresh = rig()
+    assert "no heartbeat ever reached the bridge" in watchdog_story(fresh.device, 0.0, time.time())
 
 
 def test_without_heartbeats_the_plate_is_at_zero_within_300_ms_of_the_last_one(rig):

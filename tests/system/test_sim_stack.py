@@ -39,7 +39,8 @@ def _truth_error(msg, goal) -> float:
 def _device_story(tmp_path) -> str:
     """The device's state changes and every warning or error in the stack log, for failure messages."""
     lines = [line for line in log_text(tmp_path).splitlines()
-             if "device state" in line or "WARN" in line or "ERROR" in line or "slipped" in line]
+             if "device state" in line or "WARN" in line or "ERROR" in line or "slipped" in line
+             or "starved" in line]
     return "\n".join(lines[-40:])
 
 
@@ -59,7 +60,8 @@ def test_linesinkx_on_the_plant_without_mismatch_is_within_one_percent(tmp_path)
         truth = _collect(ros, PlateAcceleration, topics.SIM_TRUE_ACCELERATION, qos.STREAM)
         status = _collect(ros, PlateMotionStatus, topics.MOTION_STATUS, qos.LATCHED)
         goal = _send_goal(ros)
-        assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_ACTIVE for s in status), 15)
+        assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_ACTIVE for s in status), 15), \
+            _device_story(tmp_path)
         n = len(truth)
         # A second of steady state, after a second's margin: under load the simulator's truth can
         # arrive late, so the first messages after ACTIVE may still be from the ramp.

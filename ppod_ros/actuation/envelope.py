@@ -52,7 +52,7 @@ from ppod_ros.actuation.harmonics import PEAK_SAMPLES_PER_PERIOD, rms, synthesiz
 from ppod_ros.actuation.plant import NominalPlant
 from ppod_ros.device.config import DeviceConfig
 from ppod_ros.errors import ConfigError, LimitError
-from ppod_ros.kinematics.stewart import LegTrajectory, leg_trajectory
+from ppod_ros.kinematics.stewart import LegTrajectory, leg_trajectories, leg_trajectory
 from ppod_ros.motion import GRAVITY_MPS2, MAX_HARMONIC, PlateMotion
 
 #: The limits in the order a goal is checked (the first one over is the one a rejection names).
@@ -122,7 +122,7 @@ def _grid(n_samples: int) -> np.ndarray:
     return theta
 
 
-def refined_max(fn, n_samples: int) -> np.ndarray:
+def refined_max(fn, n_samples: int, at=None) -> np.ndarray:
     """Maximum over one cycle of each column of ``fn(theta)``, refined beyond the sample grid.
 
     Parameters
@@ -131,6 +131,11 @@ def refined_max(fn, n_samples: int) -> np.ndarray:
         ``fn(theta)`` with theta (M,) phases of the fundamental (rad) returns (M, C) values.
     n_samples : int
         Grid of the first pass (at least 64 per period of the highest harmonic in ``fn``).
+    at : callable, optional
+        ``at(theta)`` with theta (M, C) returns (M, C): column c of ``fn`` at the phases
+        ``theta[:, c]``. The refinement evaluates each column only at its own candidates with it;
+        without it, ``fn`` is evaluated at every column's candidates and the diagonal kept, which
+        costs C times as much (the checker's calls have 18-36 columns).
 
     Returns
     -------
@@ -152,13 +157,41 @@ def refined_max(fn, n_samples: int) -> np.ndarray:
     idx = np.argsort(-score, axis=0)[: min(REFINE_CANDIDATES, n_samples)]  # (n_cand, C)
     centres = theta[idx] + _vertex(left[idx, cols], y[idx, cols], right[idx, cols], step)
     fine = step / REFINE_ZOOM
-    grid = (centres[..., None] + np.array([-fine, 0.0, fine])).reshape(-1)
     n_cand = idx.shape[0]
-    v = np.asarray(fn(grid), dtype=float).reshape(n_cand, C, 3, C)[:, cols, :, cols]  # (C, n_cand, 3)
+    if at is None:
+        grid = (centres[..., None] + np.array([-fine, 0.0, fine])).reshape(-1)
+        v = np.asarray(fn(grid), dtype=float).reshape(n_cand, C, 3, C)[:, cols, :, cols]  # (C, n_cand, 3)
+    else:
+        grid = (centres[:, None, :] + np.array([-fine, 0.0, fine])[None, :, None]).reshape(n_cand * 3, C)
+        v = np.asarray(at(grid), dtype=float).reshape(n_cand, 3, C).transpose(2, 0, 1)  # (C, n_cand, 3)
     best = np.maximum(best, v.max(axis=(1, 2)))
     final = centres.T + _vertex(v[..., 0], v[..., 1], v[..., 2], fine)  # (C, n_cand)
-    w = np.asarray(fn(final.reshape(-1)), dtype=float).reshape(C, n_cand, C)[cols, :, cols]  # (C, n_cand)
+    if at is None:
+        w = np.asarray(fn(final.reshape(-1)), dtype=float).reshape(C, n_cand, C)[cols, :, cols]  # (C, n_cand)
+    else:
+        w = np.asarray(at(np.ascontiguousarray(final.T)), dtype=float).T  # (C, n_cand)
     return np.maximum(best, w.max(axis=1))
+
+
+def _synthesize_columns(table: np.ndarray, k: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """:func:`~ppod_ros.actuation.harmonics.synthesize` computed column by column, (N, C): each
+    column's values do not depend on the other columns (a matrix product's do, in the last bit, with
+    two or more harmonics), so a peak searched in a batch is the one searched alone."""
+    phase = np.outer(theta, k)  # (N, K)
+    s, c = np.sin(phase), np.cos(phase)
+    re, im = table.real, table.imag
+    y = s[:, :1] * re[0] + c[:, :1] * im[0]
+    for j in range(1, len(k)):
+        y += s[:, j:j + 1] * re[j]
+        y += c[:, j:j + 1] * im[j]
+    return y
+
+
+def _synthesize_at(table: np.ndarray, k: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Column c of :func:`~ppod_ros.actuation.harmonics.synthesize` at its own phases ``theta[:, c]``:
+    table (K, C), theta (M, C) -> (M, C)."""
+    basis = np.exp(1j * theta[..., None] * k)  # (M, C, K)
+    return np.einsum("mck,kc->mc", basis, table).imag
 
 
 def table_peak(table: np.ndarray, k: np.ndarray | None = None) -> np.ndarray:
@@ -168,7 +201,8 @@ def table_peak(table: np.ndarray, k: np.ndarray | None = None) -> np.ndarray:
         return np.zeros(table.shape[1])
     k = np.arange(1, table.shape[0] + 1) if k is None else np.asarray(k)
     n = PEAK_SAMPLES_PER_PERIOD * max(1, int(np.max(k)))
-    return refined_max(lambda th: np.abs(synthesize(table, k, th)), n)
+    return refined_max(lambda th: np.abs(synthesize(table, k, th)), n,
+                       at=lambda th: np.abs(_synthesize_at(table, k, th)))
 
 
 def motion_extremes(phasors: np.ndarray, k: np.ndarray, radius_m: float) -> tuple[float, float, float]:
@@ -188,17 +222,28 @@ def motion_extremes_many(phasors: np.ndarray, k: np.ndarray, radius_m: float) ->
     n = PEAK_SAMPLES_PER_PERIOD * max(4, int(np.max(k)))
     table = X.transpose(1, 0, 2).reshape(X.shape[1], S * 6)
 
-    def fn(theta: np.ndarray) -> np.ndarray:
-        u = synthesize(table, k, theta).reshape(theta.size, S, 6)
-        out = np.empty((theta.size, S, 3))
+    def quantities(u: np.ndarray) -> np.ndarray:
+        """(..., 6) plate accelerations -> (..., 3): |p''|, |alpha| and the loss of normal acceleration."""
+        out = np.empty(u.shape[:-1] + (3,))
         lin, ang = u[..., :3], u[..., 3:]
         # |.| as np.linalg.norm computes it (sqrt of the sum of squares), without its per-call overhead.
-        np.sqrt(np.add.reduce(lin * lin, axis=2), out=out[..., 0])
-        np.sqrt(np.add.reduce(ang * ang, axis=2), out=out[..., 1])
-        out[..., 2] = radius_m * np.hypot(u[..., 3], u[..., 4]) - u[..., 2]  # the loss of normal acceleration
-        return out.reshape(theta.size, S * 3)
+        np.sqrt(np.add.reduce(lin * lin, axis=-1), out=out[..., 0])
+        np.sqrt(np.add.reduce(ang * ang, axis=-1), out=out[..., 1])
+        out[..., 2] = radius_m * np.hypot(u[..., 3], u[..., 4]) - u[..., 2]
+        return out
 
-    peaks = refined_max(fn, n).reshape(S, 3)
+    def fn(theta: np.ndarray) -> np.ndarray:
+        return quantities(synthesize(table, k, theta).reshape(theta.size, S, 6)).reshape(theta.size, S * 3)
+
+    def at(theta: np.ndarray) -> np.ndarray:
+        # Each (motion, quantity) column at its own phases: the motion's six components there.
+        M = theta.shape[0]
+        basis = np.exp(1j * theta.reshape(M, S, 3)[..., None] * k)  # (M, S, 3, K)
+        u = np.einsum("msqk,skj->msqj", basis, X).imag  # (M, S, 3, 6)
+        q = quantities(u)  # (M, S, 3 phases, 3 quantities): keep each column's own quantity
+        return np.stack([q[:, :, 0, 0], q[:, :, 1, 1], q[:, :, 2, 2]], axis=-1).reshape(M, S * 3)
+
+    peaks = refined_max(fn, n, at=at).reshape(S, 3)
     out[:, :2] = peaks[:, :2]
     out[:, 2] = GRAVITY_MPS2 - peaks[:, 2]
     return out
@@ -616,12 +661,13 @@ class Envelope:
         peaks = table_peak(np.concatenate([np.concatenate([I, V], axis=1) for I, V in zip(tables, volts)], axis=1),
                            np.arange(1, tables[0].shape[0] + 1)).reshape(S, 2, 6)
         forbidden = tuple(kk for kk, _, _ in self.forbidden(f, k_act))
+        strokes = self.exact_strokes(actives)
         reports = []
         for i, a in enumerate(actives):
             values, ratios = dict(freq_values), dict(freq_ratios)
             worst: dict[str, int] = {}
             self._motion_values(float(ext[i, 0]), float(ext[i, 1]), float(ext[i, 2]), values, ratios)
-            self._peak("limits.leg_stroke_m", self.exact_stroke(a), values, ratios, worst)
+            self._peak("limits.leg_stroke_m", strokes[i], values, ratios, worst)
             self._actuators(tables[i], peaks[i][0], peaks[i][1], values, ratios, worst)
             reports.append(EnvelopeReport(f, values, ratios, self._limits(), forbidden, worst))
         return reports
@@ -684,14 +730,30 @@ class Envelope:
         top = int(motion.k.max())
         if legs is None or legs.k.size < 2 * top:
             legs = leg_trajectory(self.kinematics, motion, kmax=2 * top)
+        return self._refined_strokes([legs], top)[0]
+
+    def exact_strokes(self, motions: Sequence[PlateMotion]) -> np.ndarray:
+        """:meth:`exact_stroke` of pruned motions of one frequency and one set of harmonics, (S, 6),
+        in one vectorised pass (the kinematics and the peak search per leg and motion as alone)."""
+        motions = list(motions)
+        if not motions or motions[0].is_zero():
+            return np.array([self.exact_stroke(m) for m in motions]).reshape(len(motions), 6)
+        top = int(motions[0].k.max())
+        return self._refined_strokes(leg_trajectories(self.kinematics, motions, kmax=2 * top), top)
+
+    def _refined_strokes(self, legs: list[LegTrajectory], top: int) -> np.ndarray:
         # The exact displacement is band-limited to 2 top to second order: refine its peak from
         # its harmonics and mean, and never report less than the sampled peak.
-        offset = legs.mean_m
+        S = len(legs)
+        k = legs[0].k
+        table = np.concatenate([lt.harmonics_m for lt in legs], axis=1)   # (K, S * 6)
+        offset = np.concatenate([lt.mean_m for lt in legs])
         n = PEAK_SAMPLES_PER_PERIOD * 2 * top
         refined = refined_max(
-            lambda th: np.abs(offset + synthesize(legs.harmonics_m, legs.k, th)), n
+            lambda th: np.abs(offset + _synthesize_columns(table, k, th)), n,
+            at=lambda th: np.abs(offset + _synthesize_at(table, k, th)),
         )
-        return np.maximum(refined, legs.peak_m)
+        return np.maximum(refined, np.concatenate([lt.peak_m for lt in legs])).reshape(S, 6)
 
     def _peak(self, name: str, peaks: np.ndarray, values: dict, ratios: dict, worst: dict) -> None:
         j = int(np.argmax(peaks))

@@ -14,6 +14,7 @@ harmonics, including the second-order harmonics and offsets that a Jacobian woul
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -224,24 +225,37 @@ def leg_trajectory(
     n_samples : int, optional
         Samples per period (default :func:`motion_samples_per_cycle`).
     """
-    top = int(motion.k.max()) if motion.num_harmonics else 1
+    return leg_trajectories(kin, [motion], kmax, n_samples)[0]
+
+
+def leg_trajectories(
+    kin: StewartKinematics, motions: Sequence[PlateMotion], kmax: int | None = None, n_samples: int | None = None
+) -> list[LegTrajectory]:
+    """:func:`leg_trajectory` of motions of one frequency and one set of harmonics, in one vectorised
+    pass (each motion's numbers are those it has alone: the arithmetic is elementwise per sample, and
+    the transform per leg)."""
+    motions = list(motions)
+    first = motions[0]
+    if any(m.frequency_hz != first.frequency_hz or not np.array_equal(m.k, first.k) for m in motions[1:]):
+        raise ConfigError("motions: leg_trajectories needs one frequency and one set of harmonics")
+    top = int(first.k.max()) if first.num_harmonics else 1
     kmax = 2 * top if kmax is None else int(kmax)
-    n = motion_samples_per_cycle(motion, kmax) if n_samples is None else int(n_samples)
-    t = cycle_phases(n) / motion.omega
-    delta = kin.leg_displacements(motion.displacement(t))
-    return LegTrajectory(
-        k=np.arange(1, kmax + 1),
-        harmonics_m=analyze(delta, kmax),
-        mean_m=delta.mean(axis=0),
-        peak_m=np.max(np.abs(delta), axis=0),
-        samples_m=delta,
-    )
+    n = motion_samples_per_cycle(first, kmax) if n_samples is None else int(n_samples)
+    t = cycle_phases(n) / first.omega
+    S = len(motions)
+    delta = kin.leg_displacements(np.stack([m.displacement(t) for m in motions]))  # (S, n, 6)
+    harmonics = analyze(delta.transpose(1, 0, 2).reshape(n, S * 6), kmax).reshape(kmax, S, 6)
+    mean, peak = delta.mean(axis=1), np.max(np.abs(delta), axis=1)
+    k = np.arange(1, kmax + 1)
+    return [LegTrajectory(k=k, harmonics_m=harmonics[:, i], mean_m=mean[i], peak_m=peak[i], samples_m=delta[i])
+            for i in range(S)]
 
 
 __all__ = [
     "LegTrajectory",
     "StewartKinematics",
     "leg_trajectory",
+    "leg_trajectories",
     "left_jacobian",
     "motion_samples_per_cycle",
     "rotation_and_left_jacobian",

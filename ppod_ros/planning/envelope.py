@@ -106,15 +106,18 @@ def _check_motions(envelope, motions: list[PlateMotion]) -> list:
     return reports
 
 
-def _robust(motion: PlateMotion, device, tolerance: PlantTolerance) -> float:
-    """The worst of :func:`corrected_motion_ratios` (remembered by the motion's exact arrays)."""
-    key = (device, tolerance, _exact(motion))
-    out = _ROBUST.get(key)
-    if out is None:
-        if len(_ROBUST) >= _MEMO_MAX:
+def _robust_many(motions: list[PlateMotion], device, tolerance: PlantTolerance) -> list[float]:
+    """The worst of :func:`corrected_motion_ratios` of each motion (remembered by the motion's exact
+    arrays; those not remembered in one :func:`corrected_motion_ratios_many`)."""
+    keys = [(device, tolerance, _exact(m)) for m in motions]
+    out = [_ROBUST.get(key) for key in keys]
+    miss = [i for i, r in enumerate(out) if r is None]
+    if miss:
+        if len(_ROBUST) + len(miss) > _MEMO_MAX:
             _ROBUST.clear()
-        out = _ROBUST[key] = max(corrected_motion_ratios(motion, device, tolerance).values())
-    return out
+        for i, ratios in zip(miss, corrected_motion_ratios_many([motions[i] for i in miss], device, tolerance)):
+            out[i] = _ROBUST[keys[i]] = max(ratios.values())
+    return out  # type: ignore[return-value]
 
 
 _MOTION_LIMITS = ("limits.plate_accel_mps2", "limits.plate_angular_accel_radps2", "limits.contact_margin_mps2")
@@ -123,25 +126,36 @@ _MOTION_LIMITS = ("limits.plate_accel_mps2", "limits.plate_angular_accel_radps2"
 def corrected_motion_ratios(motion: PlateMotion, device, tolerance: PlantTolerance) -> dict[str, float]:
     """The plate motion limits' worst use ratios over the tolerance's drawn plants, as the checker
     reads the table that realises ``motion`` on each (see the module docstring)."""
+    return corrected_motion_ratios_many([motion], device, tolerance)[0]
+
+
+def corrected_motion_ratios_many(motions: Sequence[PlateMotion], device,
+                                 tolerance: PlantTolerance) -> list[dict[str, float]]:
+    """:func:`corrected_motion_ratios` of each motion, those of one frequency and one set of
+    harmonics in one peak search over every (motion, plant) (its refinement per column: the cost is
+    linear in the columns)."""
     from ppod_ros.actuation.envelope import motion_extremes_many
     from ppod_ros.motion import GRAVITY_MPS2
 
-    active = motion.pruned()
-    if active.is_zero():
-        return dict.fromkeys(_MOTION_LIMITS, 0.0)
-    ks = tuple(int(k) for k in active.k)
-    T = _readings(device, tolerance, float(motion.frequency_hz), ks)
-    read = np.einsum("skij,kj->ski", T, active.phasors())
     lim = device.limits
-    # One motion per call: the peak search refines every column at every column's candidates, so
-    # its cost grows with the square of the columns (12 plants x 3 already).
-    ext = motion_extremes_many(read, np.asarray(ks), lim.working_radius_m)
-    return {
-        "limits.plate_accel_mps2": float(ext[:, 0].max() / lim.plate_accel_mps2),
-        "limits.plate_angular_accel_radps2": float(ext[:, 1].max() / lim.plate_angular_accel_radps2),
-        "limits.contact_margin_mps2": float(max(0.0, GRAVITY_MPS2 - ext[:, 2].min())
-                                            / (GRAVITY_MPS2 - lim.contact_margin_mps2)),
-    }
+    out: list[dict[str, float]] = [dict.fromkeys(_MOTION_LIMITS, 0.0) for _ in motions]
+    groups: dict[tuple, list[tuple[int, PlateMotion]]] = {}
+    for i, motion in enumerate(motions):
+        active = motion.pruned()
+        if not active.is_zero():
+            groups.setdefault((float(motion.frequency_hz), tuple(int(k) for k in active.k)), []).append((i, active))
+    for (frequency_hz, ks), members in groups.items():
+        T = _readings(device, tolerance, frequency_hz, ks)
+        read = np.concatenate([np.einsum("skij,kj->ski", T, a.phasors()) for _, a in members])
+        ext = motion_extremes_many(read, np.asarray(ks), lim.working_radius_m).reshape(len(members), -1, 3)
+        for (i, _), e in zip(members, ext):
+            out[i] = {
+                "limits.plate_accel_mps2": float(e[:, 0].max() / lim.plate_accel_mps2),
+                "limits.plate_angular_accel_radps2": float(e[:, 1].max() / lim.plate_angular_accel_radps2),
+                "limits.contact_margin_mps2": float(max(0.0, GRAVITY_MPS2 - e[:, 2].min())
+                                                    / (GRAVITY_MPS2 - lim.contact_margin_mps2)),
+            }
+    return out
 
 
 def fit_envelope(motion: PlateMotion, device, headroom: float = 0.15, step: float = RETRY_STEP,
@@ -180,7 +194,7 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
     # reading under that bound with the same headroom.
     allowance = float(getattr(device.limits, "plant_model_allowance", 0.0))
     robust = ([0.0] * len(todo) if tolerance is None else
-              [_robust(motions[i], device, tolerance) / (1.0 + allowance) for i in todo])
+              [r / (1.0 + allowance) for r in _robust_many([motions[i] for i in todo], device, tolerance)])
     # The generator accepts a goal only if its drive limits hold on every plant within the device's
     # limits.plant_uncertainty (GoalPlanner.plan): that allowance is the goal's room for the plant,
     # so these limits are kept at DRIVE_FIT (read as max_ratio), not with the headroom on top.
@@ -232,4 +246,4 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
                      requested=err.requested)
 
 
-__all__ = ["PlantTolerance", "corrected_motion_ratios", "fit_envelope", "fit_envelope_many", "uncorrected_motions"]
+__all__ = ["PlantTolerance", "corrected_motion_ratios", "corrected_motion_ratios_many", "fit_envelope", "fit_envelope_many", "uncorrected_motions"]

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from ppod_ros.actuation.corrections import CORRECTION_GUARD
 from ppod_ros.actuation.envelope import LIMIT_ORDER, Envelope, refined_max, table_peak
+from ppod_ros.actuation.harmonics import synthesize
 from ppod_ros.actuation.planning import GoalPlanner
 from ppod_ros.device import default_device_config
 from ppod_ros.errors import LimitError
@@ -28,6 +29,31 @@ def test_refined_peaks_find_the_true_extremum_between_samples():
     assert table_peak(table)[0] == pytest.approx(exact, rel=1e-9)
     grid = refined_max(lambda th: np.sin(th + phase)[:, None], 64)
     assert grid[0] == pytest.approx(1.0, abs=1e-12)
+
+
+def test_the_refinement_column_by_column_finds_what_the_dense_one_does():
+    """refined_max's ``at`` evaluates each column only at its own candidates (the dense form evaluates
+    every column at every column's candidates and keeps the diagonal): the same extrema."""
+    rng = np.random.default_rng(11)
+    for k in (np.array([1]), np.array([1, 2, 3])):
+        table = rng.normal(size=(k.size, 18)) + 1j * rng.normal(size=(k.size, 18))
+        dense = refined_max(lambda th: np.abs(synthesize(table, k, th)), 64 * int(k.max()))
+        by_column = table_peak(table, k)
+        assert np.allclose(by_column, dense, rtol=1e-13, atol=0)
+        theta = np.linspace(0, 2 * math.pi, 400_001)
+        truth = np.max(np.abs(synthesize(table, k, theta)), axis=0)
+        assert np.all(by_column >= truth * (1 - 1e-9)) and np.all(by_column <= truth * (1 + 1e-9))
+
+
+def test_exact_strokes_of_motions_checked_together_are_each_motions_own():
+    env = Envelope(CFG)
+    rng = np.random.default_rng(5)
+    motions = [LINESINKX, LINESINKX.scaled(0.4)] + [
+        PlateMotion.from_phasors(30.0, [1], (rng.normal(size=(1, 6)) + 1j * rng.normal(size=(1, 6))) * [2, 2, 1, 20, 20, 20])
+        for _ in range(3)]
+    together = env.exact_strokes([m.pruned() for m in motions])
+    for motion, row in zip(motions, together):
+        assert np.array_equal(env.exact_stroke(motion.pruned()), row)
 
 
 def test_a_goals_report_gives_every_limit_as_a_ratio_that_scales_with_the_amplitude():

@@ -10,6 +10,7 @@ from ppod_ros.errors import SolverError
 from ppod_ros.kinematics.stewart import (
     StewartKinematics,
     left_jacobian,
+    leg_trajectories,
     leg_trajectory,
     rotation_and_left_jacobian,
     rotation_matrix,
@@ -119,3 +120,20 @@ def test_leg_trajectory_first_harmonic_is_the_jacobian_of_the_pose_phasors():
     assert 0 < np.max(np.abs(legs.mean_m)) < 0.01 * first
     assert np.allclose(legs.peak_m, np.max(np.abs(legs.samples_m), axis=0))
     assert legs.samples_m.shape[0] >= 256
+
+
+def test_leg_trajectories_of_several_motions_are_each_motions_own_bit_for_bit():
+    """The checker batches the exact stroke of the motions it checks together; each motion's numbers
+    must not depend on the others (the planner remembers reports of motions checked before)."""
+    from ppod_ros.errors import ConfigError
+
+    rng = np.random.default_rng(3)
+    for k in ([1], [1, 2]):
+        motions = [PlateMotion.from_phasors(30.0, k, (rng.normal(size=(len(k), 6)) + 1j * rng.normal(size=(len(k), 6)))
+                                            * [2, 2, 1, 20, 20, 20]) for _ in range(3)]
+        for motion, together in zip(motions, leg_trajectories(KIN, motions)):
+            alone = leg_trajectory(KIN, motion)
+            for name in ("k", "harmonics_m", "mean_m", "peak_m", "samples_m"):
+                assert np.array_equal(getattr(alone, name), getattr(together, name)), name
+    with pytest.raises(ConfigError, match="one frequency"):
+        leg_trajectories(KIN, [LINESINKX, PlateMotion.single(35, [10, 0, 0, 0, 100, 0], [0] * 6)])

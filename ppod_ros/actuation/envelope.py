@@ -663,7 +663,7 @@ class Envelope:
         forbidden = tuple(kk for kk, _, _ in self.forbidden(f, k_act))
         strokes = self.exact_strokes(actives)
         reports = []
-        for i, a in enumerate(actives):
+        for i in range(len(actives)):
             values, ratios = dict(freq_values), dict(freq_ratios)
             worst: dict[str, int] = {}
             self._motion_values(float(ext[i, 0]), float(ext[i, 1]), float(ext[i, 2]), values, ratios)

@@ -246,4 +246,5 @@ def fit_envelope_many(motions: Sequence[PlateMotion], device, headroom: float = 
                      requested=err.requested)
 
 
-__all__ = ["PlantTolerance", "corrected_motion_ratios", "corrected_motion_ratios_many", "fit_envelope", "fit_envelope_many", "uncorrected_motions"]
+__all__ = ["PlantTolerance", "corrected_motion_ratios", "corrected_motion_ratios_many", "fit_envelope",
+           "fit_envelope_many", "uncorrected_motions"]

@@ -37,7 +37,7 @@ def test_the_refinement_column_by_column_finds_what_the_dense_one_does():
     rng = np.random.default_rng(11)
     for k in (np.array([1]), np.array([1, 2, 3])):
         table = rng.normal(size=(k.size, 18)) + 1j * rng.normal(size=(k.size, 18))
-        dense = refined_max(lambda th: np.abs(synthesize(table, k, th)), 64 * int(k.max()))
+        dense = refined_max(lambda th, table=table, k=k: np.abs(synthesize(table, k, th)), 64 * int(k.max()))
         by_column = table_peak(table, k)
         assert np.allclose(by_column, dense, rtol=1e-13, atol=0)
         theta = np.linspace(0, 2 * math.pi, 400_001)
@@ -48,8 +48,9 @@ def test_the_refinement_column_by_column_finds_what_the_dense_one_does():
 def test_exact_strokes_of_motions_checked_together_are_each_motions_own():
     env = Envelope(CFG)
     rng = np.random.default_rng(5)
+    scale = [2, 2, 1, 20, 20, 20]
     motions = [LINESINKX, LINESINKX.scaled(0.4)] + [
-        PlateMotion.from_phasors(30.0, [1], (rng.normal(size=(1, 6)) + 1j * rng.normal(size=(1, 6))) * [2, 2, 1, 20, 20, 20])
+        PlateMotion.from_phasors(30.0, [1], (rng.normal(size=(1, 6)) + 1j * rng.normal(size=(1, 6))) * scale)
         for _ in range(3)]
     together = env.exact_strokes([m.pruned() for m in motions])
     for motion, row in zip(motions, together):

@@ -341,7 +341,8 @@ def test_corrected_ratios_of_several_motions_are_each_motions_own():
     tol = envelope.PlantTolerance()
     sink = PlateMotion.single(30.0, [16.0, 19.0, 1.2, 33.0, 28.0, 107.0], [0.1, 1.5, 1.0, 2.9, -0.4, 1.6])
     two = PlateMotion.from_phasors(30.0, [1, 2], np.array([[3, 2, 0.5, 20, 10, 40], [1, 1, 0.2, 5, 5, 10]]) * (1 + 1j))
-    motions = [sink, PlateMotion.zero(30.0), sink.scaled(0.5), two, PlateMotion.single(35.0, [5, 0, 1, 0, 30, 0], [0] * 6)]
+    other = PlateMotion.single(35.0, [5, 0, 1, 0, 30, 0], [0] * 6)
+    motions = [sink, PlateMotion.zero(30.0), sink.scaled(0.5), two, other]
     together = envelope.corrected_motion_ratios_many(motions, device, tol)
     assert together[1] == dict.fromkeys(together[0], 0.0)
     for motion, ratios in zip(motions, together):

@@ -157,14 +157,17 @@ class AccelFeedbackNode(PpodLifecycleNode):
 
     def on_cleanup_node(self):
         self._save_misfit()
+        self.release_on_destroy()
+
+    def on_shutdown_node(self):
+        self.on_cleanup_node()
+
+    def release_on_destroy(self):
         if self.link is not None:
             self.link.stop()
         if self.bus is not None:
             self.bus.shutdown()
         self.loop = self.link = self.bus = None
-
-    def on_shutdown_node(self):
-        self.on_cleanup_node()
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9

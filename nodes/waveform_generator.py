@@ -151,6 +151,11 @@ class WaveformGeneratorNode(PpodLifecycleNode):
             self.on_deactivate_node()
         self._close()
 
+    def release_on_destroy(self):
+        # No ramp down without the executor: the heartbeats stop, and the device's watchdog ramps
+        # the plate down (as when the process dies).
+        self._close()
+
     def _close(self):
         if self.link is not None:
             self.link.stop()

@@ -129,6 +129,21 @@ class PpodLifecycleNode(LifecycleNode):
     def on_shutdown_node(self) -> None:
         """Make hardware safe and release everything, from any state."""
 
+    def release_on_destroy(self) -> None:
+        """Release threads and devices of a node destroyed without its shutdown transition (in-process:
+        a test harness, a container), without the steps that need the executor. Default: nothing."""
+
+    def destroy_node(self) -> None:
+        # A node destroyed while configured or active must not leave its threads behind: a waveform
+        # generator's heartbeat thread outliving its node kept the device's watchdog fed with no node
+        # in charge of the plate (found in the node tests: every generator left one running).
+        if self.lifecycle_state != "finalized":
+            try:
+                self.release_on_destroy()
+            except PpodError as exc:
+                self.get_logger().error(f"release on destroy failed: {exc}")
+        super().destroy_node()
+
     # --------------------------------------------------------------- rclpy callbacks
     def _run(self, transition: str, fn, new_state: str) -> TransitionCallbackReturn:
         try:

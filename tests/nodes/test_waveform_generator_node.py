@@ -216,3 +216,31 @@ def test_a_correction_learned_for_another_goal_of_the_same_name_is_never_applied
     pub.publish(correction(second.key, 0.1))     # for the goal playing: applied
     assert ros.wait_until(lambda: node.gen.applied_correction_a is not None
                           and np.any(node.gen.applied_correction_a), 3)
+
+
+def test_a_generator_destroyed_without_its_shutdown_stops_its_heartbeats(ros, sim):
+    """Each node test's generator left its heartbeat thread running to the end of the session (9 of
+    them starved at the interpreter's exit): a node destroyed while active must not keep the device's
+    watchdog fed. Destroyed without the executor, it stops its heartbeats and the device ramps the
+    plate down on its watchdog."""
+    import threading
+
+    from ppod_msgs.srv import SetPlateMotion
+
+    from ppod_nodes.common import topics
+    from ppod_ros.can import DeviceState
+
+    def heartbeat_threads():
+        return [t for t in threading.enumerate() if t.name == "ppod-can-heartbeat" and t.is_alive()]
+
+    before = len(heartbeat_threads())
+    node = _node(ros, sim)
+    resp = ros.call(SetPlateMotion, "/" + topics.SET_MOTION, _request(LINESINKX), timeout_s=10)
+    assert resp.accepted, resp.reason
+    assert ros.wait_until(lambda: sim.device.state in (DeviceState.RAMPING, DeviceState.ENABLED), 10)
+    assert len(heartbeat_threads()) == before + 1
+    ros.executor.remove_node(node)
+    ros.nodes.remove(node)
+    node.destroy_node()
+    assert len(heartbeat_threads()) == before
+    assert ros.wait_until(lambda: sim.device.state == DeviceState.WATCHDOG, 10)

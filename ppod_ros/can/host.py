@@ -23,10 +23,12 @@ Example
 
 from __future__ import annotations
 
+import atexit
 import logging
 import math
 import threading
 import time
+import weakref
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -71,6 +73,18 @@ from ppod_ros.device.config import DeviceConfig, Limits
 from ppod_ros.errors import ConfigError, DeviceError
 
 log = logging.getLogger(__name__)
+
+#: Links whose wall-clock heartbeat thread runs (see :func:`_stop_heartbeats_at_exit`).
+_HEARTBEATING: weakref.WeakSet = weakref.WeakSet()
+
+
+@atexit.register
+def _stop_heartbeats_at_exit() -> None:
+    """A process on its way out stops its heartbeats first: the device's watchdog then ramps the plate
+    down, and the threads do not run on through the interpreter's teardown (which starves them for
+    hundreds of milliseconds and would have them report it)."""
+    for link in list(_HEARTBEATING):
+        link._hb_stop.set()
 
 
 def send_estop(bus: can.BusABC, node_id: int, reason: int = 0) -> None:
@@ -521,9 +535,11 @@ class DeviceLink:
         self._hb_stop.clear()
         self._hb_thread = threading.Thread(target=self._hb_loop, name="ppod-can-heartbeat", daemon=True)
         self._hb_thread.start()
+        _HEARTBEATING.add(self)
 
     def stop_heartbeat(self) -> None:
         self._hb_stop.set()
+        _HEARTBEATING.discard(self)
         if self._hb_thread is not None:
             self._hb_thread.join(timeout=2.0)
         self._hb_thread = None

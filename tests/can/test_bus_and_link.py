@@ -258,3 +258,19 @@ def test_a_starved_heartbeat_thread_says_so_where_it_happens(config, caplog):
     assert link.counters.heartbeats_late == 1
     assert link.counters.heartbeat_max_interval_s >= 4 * config.can.heartbeat_period_s
     assert any("this process is starved" in r.getMessage() for r in caplog.records)
+
+
+def test_heartbeats_stop_when_the_process_exits(config):
+    """At exit the heartbeat threads ran on through the interpreter's teardown, starved, and reported
+    it; a process on its way out stops them first (the device's watchdog ramps the plate down)."""
+    from ppod_ros.can import host
+
+    link = DeviceLink(_StallingBus(stall_s=0.0), config)
+    link.start_heartbeat()
+    thread = link._hb_thread
+    assert thread.is_alive() and link in host._HEARTBEATING
+    host._stop_heartbeats_at_exit()
+    thread.join(timeout=5.0)
+    assert not thread.is_alive()
+    link.stop_heartbeat()
+    assert link not in host._HEARTBEATING

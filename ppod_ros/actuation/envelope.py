@@ -195,6 +195,15 @@ def _synthesize_at(table: np.ndarray, k: np.ndarray, theta: np.ndarray) -> np.nd
     return np.einsum("mck,kc->mc", basis, table).imag
 
 
+def harmonic_groups(actives: Sequence[PlateMotion]) -> dict[tuple[float, tuple[int, ...]], list[int]]:
+    """Indices of (pruned) motions by (frequency, harmonics): the groups whose peaks are searched in
+    one vectorised pass (zero motions: harmonics ``()``)."""
+    groups: dict[tuple[float, tuple[int, ...]], list[int]] = {}
+    for i, a in enumerate(actives):
+        groups.setdefault((float(a.frequency_hz), tuple(int(k) for k in a.k)), []).append(i)
+    return groups
+
+
 def table_peak(table: np.ndarray, k: np.ndarray | None = None) -> np.ndarray:
     """Refined peak of |y(t)| per column of a harmonic table (K, C) (rows k, default 1..K), shape (C,)."""
     table = np.asarray(table, dtype=complex)
@@ -630,11 +639,8 @@ class Envelope:
             if not isinstance(motion, PlateMotion):
                 raise ConfigError(f"motions[{i}]: expected a PlateMotion, got {type(motion).__name__}")
             actives.append(motion.pruned())
-        groups: dict[tuple, list[int]] = {}
-        for i, a in enumerate(actives):
-            groups.setdefault((float(a.frequency_hz), tuple(int(k) for k in a.k)), []).append(i)
         out: list[EnvelopeReport | None] = [None] * len(actives)
-        for idx in groups.values():
+        for idx in harmonic_groups(actives).values():
             for i, report in zip(idx, self._check_group([actives[i] for i in idx], [None] * len(idx))):
                 out[i] = report
         return out  # type: ignore[return-value]
@@ -737,8 +743,8 @@ class Envelope:
         """:meth:`exact_stroke` of pruned motions of one frequency and one set of harmonics, (S, 6),
         in one vectorised pass (the kinematics and the peak search per leg and motion as alone)."""
         motions = list(motions)
-        if not motions or motions[0].is_zero():
-            return np.array([self.exact_stroke(m) for m in motions]).reshape(len(motions), 6)
+        if not motions or motions[0].is_zero():   # a group's motions are all zero, or none is
+            return np.zeros((len(motions), 6))
         top = int(motions[0].k.max())
         return self._refined_strokes(leg_trajectories(self.kinematics, motions, kmax=2 * top), top)
 
@@ -782,6 +788,7 @@ __all__ = [
     "Envelope",
     "EnvelopeReport",
     "motion_extremes",
+    "harmonic_groups",
     "motion_extremes_many",
     "PlantTolerance",
     "refined_max",

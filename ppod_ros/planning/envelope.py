@@ -91,33 +91,33 @@ def _exact(motion: PlateMotion) -> tuple:
     return (motion.frequency_hz, motion.k.tobytes(), motion.amplitude.tobytes(), motion.phase.tobytes())
 
 
+def _remembered(memo: dict, keys: list, compute) -> list:
+    """The values of ``keys`` from ``memo``; the misses computed together (``compute(indices)``, in
+    their order) and remembered (a key None: computed, not remembered). Bounded: cleared when full."""
+    out = [None if key is None else memo.get(key) for key in keys]
+    miss = [i for i, r in enumerate(out) if r is None]
+    if miss:
+        if len(memo) + len(miss) > _MEMO_MAX:
+            memo.clear()
+        for i, value in zip(miss, compute(miss)):
+            out[i] = value
+            if keys[i] is not None:
+                memo[keys[i]] = value
+    return out
+
+
 def _check_motions(envelope, motions: list[PlateMotion]) -> list:
     """``envelope.check_motions(motions)``, one-harmonic motions checked before taken from ``_CHECKED``."""
-    keys = [(envelope, _exact(m)) if m.k.size == 1 else None for m in motions]
-    reports = [None if key is None else _CHECKED.get(key) for key in keys]
-    miss = [i for i, r in enumerate(reports) if r is None]
-    if miss:
-        if len(_CHECKED) + len(miss) > _MEMO_MAX:
-            _CHECKED.clear()
-        for i, report in zip(miss, envelope.check_motions([motions[i] for i in miss])):
-            reports[i] = report
-            if keys[i] is not None:
-                _CHECKED[keys[i]] = report
-    return reports
+    return _remembered(_CHECKED, [(envelope, _exact(m)) if m.k.size == 1 else None for m in motions],
+                       lambda miss: envelope.check_motions([motions[i] for i in miss]))
 
 
 def _robust_many(motions: list[PlateMotion], device, tolerance: PlantTolerance) -> list[float]:
     """The worst of :func:`corrected_motion_ratios` of each motion (remembered by the motion's exact
     arrays; those not remembered in one :func:`corrected_motion_ratios_many`)."""
-    keys = [(device, tolerance, _exact(m)) for m in motions]
-    out = [_ROBUST.get(key) for key in keys]
-    miss = [i for i, r in enumerate(out) if r is None]
-    if miss:
-        if len(_ROBUST) + len(miss) > _MEMO_MAX:
-            _ROBUST.clear()
-        for i, ratios in zip(miss, corrected_motion_ratios_many([motions[i] for i in miss], device, tolerance)):
-            out[i] = _ROBUST[keys[i]] = max(ratios.values())
-    return out  # type: ignore[return-value]
+    return _remembered(_ROBUST, [(device, tolerance, _exact(m)) for m in motions],
+                       lambda miss: [max(r.values()) for r in
+                                     corrected_motion_ratios_many([motions[i] for i in miss], device, tolerance)])
 
 
 _MOTION_LIMITS = ("limits.plate_accel_mps2", "limits.plate_angular_accel_radps2", "limits.contact_margin_mps2")
@@ -134,21 +134,19 @@ def corrected_motion_ratios_many(motions: Sequence[PlateMotion], device,
     """:func:`corrected_motion_ratios` of each motion, those of one frequency and one set of
     harmonics in one peak search over every (motion, plant) (its refinement per column: the cost is
     linear in the columns)."""
-    from ppod_ros.actuation.envelope import motion_extremes_many
+    from ppod_ros.actuation.envelope import harmonic_groups, motion_extremes_many
     from ppod_ros.motion import GRAVITY_MPS2
 
     lim = device.limits
     out: list[dict[str, float]] = [dict.fromkeys(_MOTION_LIMITS, 0.0) for _ in motions]
-    groups: dict[tuple, list[tuple[int, PlateMotion]]] = {}
-    for i, motion in enumerate(motions):
-        active = motion.pruned()
-        if not active.is_zero():
-            groups.setdefault((float(motion.frequency_hz), tuple(int(k) for k in active.k)), []).append((i, active))
-    for (frequency_hz, ks), members in groups.items():
+    actives = [m.pruned() for m in motions]
+    for (frequency_hz, ks), members in harmonic_groups(actives).items():
+        if not ks:
+            continue   # zero motions: no use
         T = _readings(device, tolerance, frequency_hz, ks)
-        read = np.concatenate([np.einsum("skij,kj->ski", T, a.phasors()) for _, a in members])
+        read = np.concatenate([np.einsum("skij,kj->ski", T, actives[i].phasors()) for i in members])
         ext = motion_extremes_many(read, np.asarray(ks), lim.working_radius_m).reshape(len(members), -1, 3)
-        for (i, _), e in zip(members, ext):
+        for i, e in zip(members, ext):
             out[i] = {
                 "limits.plate_accel_mps2": float(e[:, 0].max() / lim.plate_accel_mps2),
                 "limits.plate_angular_accel_radps2": float(e[:, 1].max() / lim.plate_angular_accel_radps2),

@@ -45,7 +45,8 @@ def _nodes(context):
     for entry in launch_entries(sim=sim, spec=spec):
         kind = LifecycleNode if entry.lifecycle else Node
         actions.append(kind(package=package, executable=entry.executable, name=entry.name, namespace="",
-                            parameters=[entry.params_file], output="screen", prefix=entry.prefix or None))
+                            parameters=[entry.params_file], output="screen", prefix=entry.prefix or None,
+                            additional_env=entry.env or None))
     return actions
 
 

@@ -7,6 +7,10 @@ finalized state (deactivate, then shutdown) while the executor still runs, so th
 publish its final status, and then tears down in the order that never aborts (ROS_NOTES.md):
 ``executor.shutdown(); spin_thread.join(); node.destroy_node(); context.try_shutdown()``.
 A second Ctrl-C during that clean-up exits at once.
+
+A launcher asks for real-time scheduling with ``PPOD_REALTIME_PRIORITY`` (the launch configuration's
+``realtime_priority``): the process takes SCHED_FIFO at that priority before any thread starts, so
+every thread has it, and its node logs whether it got it (docs/ros.md).
 """
 
 from __future__ import annotations
@@ -24,6 +28,34 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from ppod_nodes.ros_env import configure_ros_environment
+
+#: Environment variable a launcher sets to ask a node's process for SCHED_FIFO at this priority
+#: (1-99; unset or 0: normal scheduling).
+REALTIME_ENV = "PPOD_REALTIME_PRIORITY"
+
+
+def take_realtime_priority(environ=os.environ) -> tuple[str, str] | None:
+    """Take the real-time priority ``environ[REALTIME_ENV]`` asks for, for this thread and every
+    thread it starts from now on; returns (level, message) for the node's log, None when none is asked.
+    Never raises: without the permission (CAP_SYS_NICE or an RLIMIT_RTPRIO this high) the process
+    runs on at normal priority and the message says so."""
+    raw = environ.get(REALTIME_ENV, "").strip()
+    if raw in ("", "0"):
+        return None
+    try:
+        priority = int(raw)
+    except ValueError:
+        priority = -1
+    if not 1 <= priority <= 99:
+        return "warning", f"{REALTIME_ENV}={raw!r}: expected an integer 1-99; normal scheduling"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        return "warning", (f"real-time priority {priority} not granted ({reason}): normal scheduling, so on a "
+                           f"loaded machine this node's threads can wait for a core (grant it with CAP_SYS_NICE "
+                           f"or an rtprio limit; docs/ros.md)")
+    return "info", f"real-time priority {priority} (SCHED_FIFO) for every thread of this process"
 
 
 def _spin(executor: SingleThreadedExecutor, failure: list[Exception]) -> None:
@@ -52,6 +84,7 @@ def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) 
         print(node_help(factory, os.path.basename(argv[0]) if argv else "node"))
         return 0
     configure_ros_environment()
+    realtime = take_realtime_priority()   # before rclpy starts any thread: they all inherit it
     context = Context()
     rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
@@ -71,6 +104,8 @@ def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) 
     status = 0
     try:
         node = factory(context=context)
+        if realtime is not None:
+            getattr(node.get_logger(), realtime[0])(realtime[1])
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         thread = threading.Thread(target=_spin, args=(executor, failure), name="spin", daemon=True)

@@ -17,7 +17,7 @@ import re
 import socket
 import sys
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -55,6 +55,8 @@ class LaunchEntry:
     #: ``python -m MODULE ...``: the same process without an installed console script.
     cmd: tuple[str, ...]
     nice: int = 0
+    #: Environment the launch action adds (``PPOD_REALTIME_PRIORITY``, as ``ppod up`` sets it).
+    env: dict[str, str] = field(default_factory=dict)
 
     @property
     def prefix(self) -> str:
@@ -116,5 +118,5 @@ def launch_entries(config: str | Path | None = None, sim: bool = False, out_dir:
             raise ConfigError(f"{spec.origin}: node {node.name}: module {node.module} has no console script "
                               f"(known: {', '.join(sorted(EXECUTABLES))})")
         entries.append(LaunchEntry(node.name, node.module, executable, node.lifecycle, params, str(path), cmd,
-                                   node.nice))
+                                   node.nice, dict(node.env)))
     return entries

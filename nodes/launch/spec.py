@@ -49,6 +49,16 @@ class NodeSpec:
     #: Niceness added to the child process (0..19): a simulated device yields the CPU to the host's
     #: nodes, since a starved simulator only slows its own clock while a starved host misses heartbeats.
     nice: int = 0
+    #: SCHED_FIFO priority asked for the child (1-99; 0: normal scheduling), through
+    #: ``PPOD_REALTIME_PRIORITY`` (nodes/common/runner.py): the waveform generator's, whose heartbeat
+    #: thread must get the GIL within the device's watchdog on a loaded machine. Not granted (no
+    #: CAP_SYS_NICE or rtprio limit): the node runs at normal priority and logs it.
+    realtime_priority: int = 0
+
+    @property
+    def env(self) -> dict[str, str]:
+        """Environment the child gets on top of the launcher's."""
+        return {"PPOD_REALTIME_PRIORITY": str(self.realtime_priority)} if self.realtime_priority else {}
 
     def enabled(self, sim: bool) -> bool:
         return self.when == "always" or (self.when == "sim") == sim
@@ -139,6 +149,7 @@ def launch_spec_from_dict(data: dict[str, Any], origin: str = "launch config") -
             args=tuple(args),
             ready=item.string("ready", ""),
             nice=item.integer("nice", 0, min_value=0, max_value=19),
+            realtime_priority=item.integer("realtime_priority", 0, min_value=0, max_value=99),
         )
         if spec.ready:
             try:

@@ -126,7 +126,7 @@ class Supervisor:
         cmd = [sys.executable, "-u", "-m", spec.module, *spec.args, "--ros-args", "-r", f"__node:={spec.name}",
                "--params-file", str(params_file)]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                text=True, bufsize=1, env=self.env, start_new_session=True,
+                                text=True, bufsize=1, env=self._child_env(spec), start_new_session=True,
                                 preexec_fn=_child_setup(spec.nice))
         child = Child(spec, proc, params_file)
         child.reader = threading.Thread(target=self._forward, args=(child, len(self.children)), daemon=True,
@@ -134,8 +134,16 @@ class Supervisor:
         child.reader.start()
         self.children.append(child)
         self.say(f"started {spec.name} (pid {proc.pid}): python -m {spec.module}"
-                 + (f" (nice {spec.nice})" if spec.nice else ""))
+                 + (f" (nice {spec.nice})" if spec.nice else "")
+                 + (f" (real-time priority {spec.realtime_priority} asked)" if spec.realtime_priority else ""))
         return child
+
+    def _child_env(self, spec: NodeSpec) -> dict[str, str]:
+        """The launcher's environment, without a real-time request of its own, plus the node's."""
+        env = dict(self.env if self.env is not None else os.environ)
+        env.pop("PPOD_REALTIME_PRIORITY", None)
+        env.update(spec.env)
+        return env
 
     # ------------------------------------------------------------------ watch
     def dead_children(self) -> list[Child]:

@@ -108,3 +108,38 @@ def test_nice_outside_0_to_19_is_one_clear_error(tmp_path):
 
     with pytest.raises(ConfigError, match=r"nodes\[0\].nice"):
         launch_spec_from_dict({"nodes": [{"name": "a", "module": "x", "nice": 25}]})
+
+
+def test_a_node_asking_for_real_time_priority_gets_the_request_and_no_other_node_does(tmp_path):
+    """The generator's heartbeat thread shares its process's GIL with the goal checks; preempted while
+    holding it, the process sent heartbeats up to 156 ms apart (the watchdog allows 150). The launcher
+    passes the node's realtime_priority to it, and only to it (not one inherited from its own environment)."""
+    import io
+    import os
+
+    from ppod_nodes.launch.spec import NodeSpec
+    from ppod_nodes.launch.supervisor import Supervisor
+
+    env = {**os.environ, "PPOD_REALTIME_PRIORITY": "33"}   # the launcher's own: never passed on
+    sup = Supervisor(env, sim=True, out=io.StringIO())
+    try:
+        plain = sup.start(NodeSpec("plain", "tests.support.sleeper", lifecycle=False))
+        rt = sup.start(NodeSpec("rt", "tests.support.sleeper", lifecycle=False, realtime_priority=10))
+
+        def environ(pid):
+            raw = Path(f"/proc/{pid}/environ").read_bytes().split(b"\0")
+            return dict(item.decode().split("=", 1) for item in raw if b"=" in item)
+
+        assert environ(rt.process.pid).get("PPOD_REALTIME_PRIORITY") == "10"
+        assert "PPOD_REALTIME_PRIORITY" not in environ(plain.process.pid)
+    finally:
+        assert sup.stop_all(10)
+        sup.close()
+
+
+def test_realtime_priority_outside_0_to_99_is_one_clear_error():
+    from ppod_nodes.launch.spec import launch_spec_from_dict
+    from ppod_ros.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"nodes\[0\].realtime_priority"):
+        launch_spec_from_dict({"nodes": [{"name": "a", "module": "x", "realtime_priority": 100}]})

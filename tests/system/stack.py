@@ -13,7 +13,9 @@ from ppod_nodes.launch.stack import Stack
 
 SIM = {"name": "sim_device", "module": "ppod_sim.ros_node", "lifecycle": False, "when": "sim", "nice": 5,
        "ready": "CAN bridge on", "params": {"port": "{sim_port}", "camera": False, "mismatch": "default"}}
-GENERATOR = {"name": "waveform_generator", "module": "ppod_nodes.waveform_generator",
+# As nodes/data/ppod_up.yaml: the generator under SCHED_FIFO where granted (its heartbeats on a loaded
+# machine; a CI run tripped the device's watchdog with 157 ms between two of them).
+GENERATOR = {"name": "waveform_generator", "module": "ppod_nodes.waveform_generator", "realtime_priority": 10,
              "sim_params": {"can_interface": "remote", "can_channel": "ws://127.0.0.1:{sim_port}/",
                             "use_sim_time": True}}
 FEEDBACK = {"name": "accel_feedback", "module": "ppod_nodes.accel_feedback",

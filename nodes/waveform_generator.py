@@ -141,6 +141,12 @@ class WaveformGeneratorNode(PpodLifecycleNode):
             self.destroy_timer(self._hb_timer)
             self._hb_timer = None
         self.link.stop_heartbeat()
+        c = self.link.counters
+        if c.heartbeat_max_interval_s > 0:
+            (self.get_logger().warning if c.heartbeats_late else self.get_logger().info)(
+                f"heartbeats: longest interval {1e3 * c.heartbeat_max_interval_s:.0f} ms "
+                f"(period {1e3 * self.config.can.heartbeat_period_s:.0f} ms); {c.heartbeats_late} more than "
+                f"two periods apart")
         self._publish_status()
 
     def on_cleanup_node(self):

@@ -42,7 +42,7 @@ def _request(text, dry_run=False):
     return SetPlateMotion.Request(motion=motion_to_msg(PlateMotion.from_yaml_text(text)), dry_run=dry_run)
 
 
-def test_goal_is_accepted_played_and_ramped_down_on_deactivate(ros, sim):
+def test_goal_is_accepted_played_and_ramped_down_on_deactivate(ros, sim, capfd):
     from ppod_msgs.msg import PlateMotion as PlateMotionMsg
     from ppod_msgs.msg import PlateMotionStatus
     from ppod_msgs.srv import SetPlateMotion
@@ -64,6 +64,11 @@ def test_goal_is_accepted_played_and_ramped_down_on_deactivate(ros, sim):
     node.trigger_deactivate()
     assert node.lifecycle_state == "inactive"
     assert ros.wait_until(lambda: sim.device.state == DeviceState.DISABLED, 3)
+    # The session's heartbeat record, for a watchdog trip to be read against (docs/ros.md).
+    import re
+
+    assert re.search(r"heartbeats: longest interval \d+ ms \(period 50 ms\); \d+ more than two periods apart",
+                     capfd.readouterr().err)
 
 
 def test_bad_goals_are_rejected_with_the_reason_and_nothing_goes_on_the_bus(ros, sim):

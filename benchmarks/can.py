@@ -11,19 +11,27 @@ Sections (all on this machine, no ROS):
            simulated device on a virtual bus)
   bridge   frames per second the python-can-remote bridge carries from the device to a client
   sim      how much faster than real time the simulated plant and the whole device run
+  heartbeat  the host's heartbeat thread (50 ms) on a loaded machine: the interval between its
+           sends while a thread of the same process runs bursts of Python code (40 ms of CPU five
+           times a second: the generator's goal checks, holding the GIL) and --busy processes keep
+           the cores busy, at normal scheduling and at the real-time priority ppod up asks for the
+           waveform generator, alternating runs; the device's watchdog trips after 150 ms without one
 
 examples:
   ppod bench can
   ppod bench can --sections load latency --repeats 500
   ppod bench can --quick
+  ppod bench can --sections heartbeat --busy 6 --seconds 15
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import json
 import math
+import os
 import re
 import select
 import subprocess
@@ -36,7 +44,7 @@ import can
 import numpy as np
 
 HELP = "CAN bus load and goal-to-frame latency (ROS-free path), bridge throughput, simulator speed"
-SECTIONS = ("load", "latency", "node", "bridge", "sim")
+SECTIONS = ("load", "latency", "node", "bridge", "sim", "heartbeat")
 _channels = itertools.count()
 
 
@@ -54,6 +62,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--repeats", type=int, default=200, help="goals per latency measurement (default 200)"
     )
+    parser.add_argument("--busy", type=int, default=6,
+                        help="heartbeat: busy processes beside the heartbeat's process (default 6)")
     parser.add_argument("--quick", action="store_true", help="short runs (a smoke test of the benchmark)")
 
 
@@ -442,6 +452,99 @@ def bench_sim(args) -> list[dict]:
     return rows
 
 
+def _busy_until(deadline: float) -> None:
+    x = 0.0
+    while time.time() < deadline:
+        for i in range(10000):
+            x += i * 1e-9
+
+
+class _SendTimes(can.BusABC):
+    """A bus that keeps the monotonic time of every send (in the sending thread)."""
+
+    def __init__(self):
+        super().__init__(channel="heartbeat-bench")
+        self.times: list[float] = []
+
+    def send(self, msg, timeout=None):
+        self.times.append(time.monotonic())
+
+    def _recv_internal(self, timeout):
+        time.sleep(min(timeout or 0.0, 0.01))
+        return None, False
+
+
+def _heartbeat_child(priority: int, seconds: float, queue) -> None:
+    """In a process of its own: ask for ``priority`` as a launched node does, run bursts of Python code
+    in one thread (the generator's goal checks) and a link's heartbeat thread; report the send times."""
+    from ppod_nodes.common.runner import REALTIME_ENV, take_realtime_priority
+    from ppod_ros.can import DeviceLink
+    from ppod_ros.device import default_device_config
+
+    said = take_realtime_priority({REALTIME_ENV: str(priority)})
+    stop = threading.Event()
+
+    def python_work():   # 40 ms of CPU five times a second, as a goal's checks come (holding the GIL)
+        a = np.random.default_rng(0).random((40, 40))
+        while not stop.is_set():
+            t0 = time.thread_time()
+            while time.thread_time() - t0 < 0.04:
+                s = 0
+                for i in range(2000):
+                    s += i
+                a = a @ a.T
+                a /= np.abs(a).max()
+            stop.wait(0.2)
+
+    worker = threading.Thread(target=python_work, daemon=True)
+    worker.start()
+    bus = _SendTimes()
+    link = DeviceLink(bus, default_device_config())
+    link.start_heartbeat()
+    time.sleep(seconds)
+    link.stop_heartbeat()
+    bus.shutdown()
+    stop.set()
+    worker.join()
+    queue.put({"said": said, "policy": os.sched_getscheduler(0), "times": bus.times})
+
+
+def bench_heartbeat(args) -> list[dict]:
+    """Heartbeat intervals of a process running Python code beside busy processes, at normal
+    scheduling and at the real-time priority ``ppod up`` asks for the waveform generator."""
+    import multiprocessing
+
+    seconds = 2.0 if args.quick else max(2.0, float(args.seconds))
+    arms = [("normal scheduling", 0), ("SCHED_FIFO 10 (ppod up's waveform_generator)", 10)]
+    intervals: dict[str, list[float]] = {name: [] for name, _ in arms}
+    granted: dict[str, bool] = {}
+    ctx = multiprocessing.get_context("spawn")
+    for _ in range(1 if args.quick else 2):
+        for name, priority in arms:
+            deadline = time.time() + seconds + 3.0
+            busy = [ctx.Process(target=_busy_until, args=(deadline,), daemon=True) for _ in range(args.busy)]
+            for p in busy:
+                p.start()
+            queue = ctx.Queue()
+            child = ctx.Process(target=_heartbeat_child, args=(priority, seconds, queue), daemon=True)
+            child.start()
+            got = queue.get(timeout=seconds + 60.0)
+            child.join()
+            for p in busy:
+                p.join()
+            intervals[name] += list(np.diff(got["times"]))
+            granted[name] = priority == 0 or got["policy"] == os.SCHED_FIFO
+    rows = []
+    for name, priority in arms:
+        iv = 1e3 * np.asarray(intervals[name])
+        rows.append({"scheduling": name if granted[name] else f"{name}: not granted, normal",
+                     "priority": priority, "granted": granted[name], "n": int(iv.size),
+                     "median_ms": float(np.median(iv)), "p99_ms": float(np.percentile(iv, 99)),
+                     "max_ms": float(iv.max()), "over_100_ms": int(np.sum(iv > 100.0)),
+                     "busy_processes": args.busy, "seconds_per_run": seconds})
+    return rows
+
+
 def _print_table(title: str, header: list[str], rows: list[list[str]]) -> None:
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
     print(f"\n{title}")
@@ -455,12 +558,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(getattr(args, "out", "out/bench"))
     out.mkdir(parents=True, exist_ok=True)
     result: dict = {}
-    try:
-        import os
-
+    with contextlib.suppress(OSError):
         result["machine"] = {"cpus": os.cpu_count(), "load_1min": os.getloadavg()[0]}
-    except OSError:
-        pass
     if "load" in args.sections:
         rows = result["load"] = bench_load(args)
         _print_table(
@@ -537,6 +636,15 @@ def run(args: argparse.Namespace) -> int:
             "Simulated device speed (LineSinkX, 30 Hz)",
             ["what", "exact geometry", "x real time"],
             [[r["what"], "yes" if r["exact_geometry"] else "no", f"{r['factor']:.1f}"] for r in rows],
+        )
+    if "heartbeat" in args.sections:
+        rows = result["heartbeat"] = bench_heartbeat(args)
+        _print_table(
+            f"Heartbeat intervals (period 50 ms; watchdog 150 ms) with a Python-busy thread in the same "
+            f"process and {args.busy} busy processes, {rows[0]['seconds_per_run']:g} s runs alternating",
+            ["process scheduling", "sends", "median ms", "p99 ms", "max ms", "> 100 ms"],
+            [[r["scheduling"], str(r["n"]), f"{r['median_ms']:.1f}", f"{r['p99_ms']:.1f}", f"{r['max_ms']:.1f}",
+              str(r["over_100_ms"])] for r in rows],
         )
     if "machine" in result:
         print(

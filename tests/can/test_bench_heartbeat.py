@@ -1,0 +1,22 @@
+"""`ppod bench can --sections heartbeat` runs both arms and says what each process got (no timing
+assertions: the figures are the benchmark's, in the README)."""
+
+import argparse
+
+from ppod_bench.can import bench_heartbeat
+
+
+def test_the_heartbeat_section_measures_both_schedulings_and_reports_whether_real_time_was_granted():
+    rows = bench_heartbeat(argparse.Namespace(quick=True, seconds=2.0, busy=1))
+    assert [r["priority"] for r in rows] == [0, 10]
+    for r in rows:
+        assert r["n"] >= 10                      # 2 s of 50 ms heartbeats, each arm
+        assert 0 < r["median_ms"] <= r["p99_ms"] <= r["max_ms"]
+        assert r["busy_processes"] == 1
+    normal, realtime = rows
+    assert normal["granted"] and normal["scheduling"] == "normal scheduling"
+    # Granted where the process may take SCHED_FIFO (CAP_SYS_NICE or an rtprio limit), and said otherwise.
+    if realtime["granted"]:
+        assert realtime["scheduling"] == "SCHED_FIFO 10 (ppod up's waveform_generator)"
+    else:
+        assert realtime["scheduling"].endswith("not granted, normal")

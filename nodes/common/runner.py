@@ -55,7 +55,7 @@ def take_realtime_priority(environ=os.environ) -> tuple[str, str] | None:
         return "warning", (f"real-time priority {priority} not granted ({reason}): normal scheduling, so on a "
                            f"loaded machine this node's threads can wait for a core (grant it with CAP_SYS_NICE "
                            f"or an rtprio limit; docs/ros.md)")
-    return "info", f"real-time priority {priority} (SCHED_FIFO) for every thread of this process"
+    return "info", f"real-time priority {priority} (SCHED_FIFO) for the node's threads"
 
 
 def _spin(executor: SingleThreadedExecutor, failure: list[Exception]) -> None:

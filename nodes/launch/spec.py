@@ -52,13 +52,18 @@ class NodeSpec:
     #: SCHED_FIFO priority asked for the child (1-99; 0: normal scheduling), through
     #: ``PPOD_REALTIME_PRIORITY`` (nodes/common/runner.py): the waveform generator's, whose heartbeat
     #: thread must get the GIL within the device's watchdog on a loaded machine. Not granted (no
-    #: CAP_SYS_NICE or rtprio limit): the node runs at normal priority and logs it.
+    #: CAP_SYS_NICE or rtprio limit): the node runs at normal priority and logs it. Such a node's
+    #: BLAS runs on the calling thread (``OPENBLAS_NUM_THREADS=1``): its worker threads start at
+    #: import, before the process takes its priority, and a goal check waiting for one at normal
+    #: priority on a busy machine held the process up to 376 ms (the watchdog tripped).
     realtime_priority: int = 0
 
     @property
     def env(self) -> dict[str, str]:
         """Environment the child gets on top of the launcher's."""
-        return {"PPOD_REALTIME_PRIORITY": str(self.realtime_priority)} if self.realtime_priority else {}
+        if not self.realtime_priority:
+            return {}
+        return {"PPOD_REALTIME_PRIORITY": str(self.realtime_priority), "OPENBLAS_NUM_THREADS": "1"}
 
     def enabled(self, sim: bool) -> bool:
         return self.when == "always" or (self.when == "sim") == sim

@@ -32,7 +32,7 @@ def test_launch_entries_leave_no_placeholder_unfilled(sim, tmp_path):
         assert by_name["sim_device"].prefix == "nice -n 5"
         assert by_name["sim_device"].env == {}
         # The generator asks for real-time scheduling (its heartbeats; nodes/data/ppod_up.yaml).
-        assert by_name["waveform_generator"].env == {"PPOD_REALTIME_PRIORITY": "10"}
+        assert by_name["waveform_generator"].env == {"PPOD_REALTIME_PRIORITY": "10", "OPENBLAS_NUM_THREADS": "1"}
 
 
 def test_an_unknown_placeholder_is_a_one_line_config_error(tmp_path):
@@ -87,7 +87,7 @@ def test_the_launch_file_starts_managed_nodes_with_the_console_scripts(tmp_path,
     nodes = [a for a in actions if isinstance(a, (LifecycleNode, Node))]
     assert [type(n).__name__ for n in nodes] == ["Node"] + ["LifecycleNode"] * 4 + ["Node"]
     envs = {n.kwargs["name"]: n.kwargs["additional_env"] for n in nodes}
-    assert envs["waveform_generator"] == {"PPOD_REALTIME_PRIORITY": "10"}
+    assert envs["waveform_generator"] == {"PPOD_REALTIME_PRIORITY": "10", "OPENBLAS_NUM_THREADS": "1"}
     assert all(env is None for name, env in envs.items() if name != "waveform_generator")
     for n in nodes:
         assert n.kwargs["executable"].startswith("ppod-")

@@ -132,6 +132,9 @@ def test_a_node_asking_for_real_time_priority_gets_the_request_and_no_other_node
 
         assert environ(rt.process.pid).get("PPOD_REALTIME_PRIORITY") == "10"
         assert "PPOD_REALTIME_PRIORITY" not in environ(plain.process.pid)
+        # Its BLAS on the calling thread: no worker at normal priority for a goal check to wait on.
+        assert environ(rt.process.pid).get("OPENBLAS_NUM_THREADS") == "1"
+        assert environ(plain.process.pid).get("OPENBLAS_NUM_THREADS") == os.environ.get("OPENBLAS_NUM_THREADS")
     finally:
         assert sup.stop_all(10)
         sup.close()

@@ -514,10 +514,13 @@ def bench_heartbeat(args) -> list[dict]:
     scheduling and at the real-time priority ``ppod up`` asks for the waveform generator."""
     import multiprocessing
 
+    from ppod_nodes.launch.spec import NodeSpec
+
     seconds = 2.0 if args.quick else max(2.0, float(args.seconds))
     arms = [("normal scheduling", 0), ("SCHED_FIFO 10 (ppod up's waveform_generator)", 10)]
     intervals: dict[str, list[float]] = {name: [] for name, _ in arms}
     granted: dict[str, bool] = {}
+    said: dict[str, str] = {}
     ctx = multiprocessing.get_context("spawn")
     for _ in range(1 if args.quick else 2):
         for name, priority in arms:
@@ -527,13 +530,25 @@ def bench_heartbeat(args) -> list[dict]:
                 p.start()
             queue = ctx.Queue()
             child = ctx.Process(target=_heartbeat_child, args=(priority, seconds, queue), daemon=True)
-            child.start()
+            # The environment ppod up gives such a node (its BLAS on one thread), for the child's start.
+            env = NodeSpec("heartbeat", "-", realtime_priority=priority).env
+            saved = {k: os.environ.get(k) for k in env}
+            os.environ.update(env)
+            try:
+                child.start()
+            finally:
+                for k, v in saved.items():
+                    if v is None:
+                        os.environ.pop(k, None)
+                    else:
+                        os.environ[k] = v
             got = queue.get(timeout=seconds + 60.0)
             child.join()
             for p in busy:
                 p.join()
             intervals[name] += list(np.diff(got["times"]))
             granted[name] = priority == 0 or got["policy"] == os.SCHED_FIFO
+            said[name] = got["said"][1] if got["said"] else ""
     rows = []
     for name, priority in arms:
         iv = 1e3 * np.asarray(intervals[name])
@@ -541,7 +556,7 @@ def bench_heartbeat(args) -> list[dict]:
                      "priority": priority, "granted": granted[name], "n": int(iv.size),
                      "median_ms": float(np.median(iv)), "p99_ms": float(np.percentile(iv, 99)),
                      "max_ms": float(iv.max()), "over_100_ms": int(np.sum(iv > 100.0)),
-                     "busy_processes": args.busy, "seconds_per_run": seconds})
+                     "busy_processes": args.busy, "seconds_per_run": seconds, "node_said": said[name]})
     return rows
 
 

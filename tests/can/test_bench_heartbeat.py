@@ -16,7 +16,10 @@ def test_the_heartbeat_section_measures_both_schedulings_and_reports_whether_rea
     normal, realtime = rows
     assert normal["granted"] and normal["scheduling"] == "normal scheduling"
     # Granted where the process may take SCHED_FIFO (CAP_SYS_NICE or an rtprio limit), and said otherwise.
+    assert normal["node_said"] == ""
     if realtime["granted"]:
         assert realtime["scheduling"] == "SCHED_FIFO 10 (ppod up's waveform_generator)"
+        assert "real-time priority 10 (SCHED_FIFO)" in realtime["node_said"]
     else:
         assert realtime["scheduling"].endswith("not granted, normal")
+        assert "not granted" in realtime["node_said"]

@@ -17,3 +17,6 @@ def test_the_lab_example_runs_every_node_on_can0_without_the_simulator(tmp_path)
         assert entries[name].parameters["can_interface"] == "socketcan"
         assert entries[name].parameters["can_channel"] == "can0"
     assert Path(entries["part_tracker"].parameters["camera_config"]).exists()
+    # The generator asks for real-time scheduling on the real device as in the simulated stack.
+    assert entries["waveform_generator"].env == {"PPOD_REALTIME_PRIORITY": "10", "OPENBLAS_NUM_THREADS": "1"}
+    assert all(not e.env for name, e in entries.items() if name != "waveform_generator")

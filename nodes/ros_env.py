@@ -13,6 +13,11 @@ from collections.abc import MutableMapping
 
 VALID_RANGES = ("LOCALHOST", "SUBNET", "OFF", "SYSTEM_DEFAULT")
 
+#: Environment variable a launcher sets to ask a node's process for SCHED_FIFO at this priority
+#: (1-99; unset or 0: normal scheduling): set by ``NodeSpec.env``, taken by
+#: ``ppod_nodes.common.runner.take_realtime_priority``.
+REALTIME_ENV = "PPOD_REALTIME_PRIORITY"
+
 
 def configure_ros_environment(env: MutableMapping[str, str] | None = None, discovery_range: str | None = None
                               ) -> str:

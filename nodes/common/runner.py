@@ -9,8 +9,10 @@ publish its final status, and then tears down in the order that never aborts (RO
 A second Ctrl-C during that clean-up exits at once.
 
 A launcher asks for real-time scheduling with ``PPOD_REALTIME_PRIORITY`` (the launch configuration's
-``realtime_priority``): the process takes SCHED_FIFO at that priority before any thread starts, so
-every thread has it, and its node logs whether it got it (docs/ros.md).
+``realtime_priority``): the process takes SCHED_FIFO at that priority before rclpy starts its
+threads, which inherit it, and its node logs whether it got it (docs/ros.md). Threads started
+earlier, at import (BLAS workers), keep normal priority: ``NodeSpec.env`` gives such a node one BLAS
+thread.
 """
 
 from __future__ import annotations
@@ -27,11 +29,7 @@ from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from ppod_nodes.ros_env import configure_ros_environment
-
-#: Environment variable a launcher sets to ask a node's process for SCHED_FIFO at this priority
-#: (1-99; unset or 0: normal scheduling).
-REALTIME_ENV = "PPOD_REALTIME_PRIORITY"
+from ppod_nodes.ros_env import REALTIME_ENV, configure_ros_environment
 
 
 def take_realtime_priority(environ=os.environ) -> tuple[str, str] | None:
@@ -84,7 +82,7 @@ def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) 
         print(node_help(factory, os.path.basename(argv[0]) if argv else "node"))
         return 0
     configure_ros_environment()
-    realtime = take_realtime_priority()   # before rclpy starts any thread: they all inherit it
+    realtime = take_realtime_priority()   # before rclpy starts its threads: they inherit it
     context = Context()
     rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()

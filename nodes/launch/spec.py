@@ -30,6 +30,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from ppod_nodes.ros_env import REALTIME_ENV
 from ppod_ros.config.fields import Fields, load_yaml_file
 from ppod_ros.errors import ConfigError
 
@@ -63,7 +64,7 @@ class NodeSpec:
         """Environment the child gets on top of the launcher's."""
         if not self.realtime_priority:
             return {}
-        return {"PPOD_REALTIME_PRIORITY": str(self.realtime_priority), "OPENBLAS_NUM_THREADS": "1"}
+        return {REALTIME_ENV: str(self.realtime_priority), "OPENBLAS_NUM_THREADS": "1"}
 
     def enabled(self, sim: bool) -> bool:
         return self.when == "always" or (self.when == "sim") == sim

@@ -26,6 +26,7 @@ from typing import IO
 
 from ppod_nodes.common.params import params_file_text
 from ppod_nodes.launch.spec import NodeSpec
+from ppod_nodes.ros_env import REALTIME_ENV
 
 _COLORS = ["36", "33", "35", "32", "34", "31", "96", "93"]
 _PR_SET_PDEATHSIG = 1
@@ -141,7 +142,7 @@ class Supervisor:
     def _child_env(self, spec: NodeSpec) -> dict[str, str]:
         """The launcher's environment, without a real-time request of its own, plus the node's."""
         env = dict(self.env if self.env is not None else os.environ)
-        env.pop("PPOD_REALTIME_PRIORITY", None)
+        env.pop(REALTIME_ENV, None)
         env.update(spec.env)
         return env
 

@@ -452,13 +452,6 @@ def bench_sim(args) -> list[dict]:
     return rows
 
 
-def _busy_until(deadline: float) -> None:
-    x = 0.0
-    while time.time() < deadline:
-        for i in range(10000):
-            x += i * 1e-9
-
-
 class _SendTimes(can.BusABC):
     """A bus that keeps the monotonic time of every send (in the sending thread)."""
 
@@ -513,7 +506,9 @@ def bench_heartbeat(args) -> list[dict]:
     """Heartbeat intervals of a process running Python code beside busy processes, at normal
     scheduling and at the real-time priority ``ppod up`` asks for the waveform generator."""
     import multiprocessing
+    from unittest import mock
 
+    from ppod_bench.solver_stalls import busy_core
     from ppod_nodes.launch.spec import NodeSpec
 
     seconds = 2.0 if args.quick else max(2.0, float(args.seconds))
@@ -524,28 +519,14 @@ def bench_heartbeat(args) -> list[dict]:
     ctx = multiprocessing.get_context("spawn")
     for _ in range(1 if args.quick else 2):
         for name, priority in arms:
-            deadline = time.time() + seconds + 3.0
-            busy = [ctx.Process(target=_busy_until, args=(deadline,), daemon=True) for _ in range(args.busy)]
-            for p in busy:
-                p.start()
             queue = ctx.Queue()
             child = ctx.Process(target=_heartbeat_child, args=(priority, seconds, queue), daemon=True)
-            # The environment ppod up gives such a node (its BLAS on one thread), for the child's start.
-            env = NodeSpec("heartbeat", "-", realtime_priority=priority).env
-            saved = {k: os.environ.get(k) for k in env}
-            os.environ.update(env)
-            try:
-                child.start()
-            finally:
-                for k, v in saved.items():
-                    if v is None:
-                        os.environ.pop(k, None)
-                    else:
-                        os.environ[k] = v
-            got = queue.get(timeout=seconds + 60.0)
-            child.join()
-            for p in busy:
-                p.join()
+            with busy_core(count=args.busy):
+                # The environment ppod up gives such a node (its BLAS on one thread), for the child's start.
+                with mock.patch.dict(os.environ, NodeSpec("heartbeat", "-", realtime_priority=priority).env):
+                    child.start()
+                got = queue.get(timeout=seconds + 60.0)
+                child.join()
             intervals[name] += list(np.diff(got["times"]))
             granted[name] = priority == 0 or got["policy"] == os.SCHED_FIFO
             said[name] = got["said"][1] if got["said"] else ""

@@ -25,22 +25,25 @@ BUSY_MAX_S = 120.0
 
 
 @contextmanager
-def busy_core(enabled: bool = True):
-    """A child process spinning on one core for at most BUSY_MAX_S seconds."""
-    if not enabled:
+def busy_core(enabled: bool = True, count: int = 1):
+    """``count`` child processes, each spinning on a core for at most BUSY_MAX_S seconds; yields the
+    first (None when not enabled or none)."""
+    if not enabled or count < 1:
         yield None
         return
     code = f"import time\nend = time.time() + {BUSY_MAX_S}\nwhile time.time() < end:\n    pass\n"
-    proc = subprocess.Popen([sys.executable, "-c", code])
+    procs = [subprocess.Popen([sys.executable, "-c", code]) for _ in range(count)]
     time.sleep(0.2)
     try:
-        yield proc
+        yield procs[0]
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
 
 
 @contextmanager

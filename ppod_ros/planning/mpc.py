@@ -151,6 +151,13 @@ class MpcSettings:
                                           # candidates only while a part is pivoted (pivot_from_rad)
     pair_lines: bool = False              # the line sink through every two goals whose parts are near them
                                           # (4 of 8 against 5 of 8)
+    swap_from_rad: float = 1.0            # two unfinished parts whose segment has to turn at least this
+                                          # much to lie as their goals do (a swap: 180 deg): the rotation
+                                          # about the fixed point of that rigid motion, both ways, is a
+                                          # candidate (pair_rotation; no sink or transport turns the segment
+                                          # between two parts; 0: off). Benchmark scenes, seeds 0 and 1:
+                                          # four parts 29/40 against 19/40 (off), three 39/40 against
+                                          # 37/40; 0.6 and 2.0 rad: three parts 37/40 and 16/20 (seed 0)
     unlearned_motions: int = 0            # the accelerometer feedback plays a session's first motions with
                                           # the plant it has not learned yet (docs/feedback.md: 12-18 % off,
                                           # then 3.5 %): they are predicted at the mean velocity over the
@@ -267,7 +274,7 @@ class MpcSettings:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 0):
                 raise ConfigError(f"{name}: expected an integer >= 0 (0: no budget), got {v!r}")
-        for name in ("hold_gave_up_m", "hold_gave_up_rad", "gave_up_near_m"):
+        for name in ("hold_gave_up_m", "hold_gave_up_rad", "gave_up_near_m", "swap_from_rad"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"{name}: must be >= 0 (0: off), got {v!r}")
@@ -505,16 +512,33 @@ def _spins_about(planner: MultiTask, goal: PartGoal, centre, kind: str) -> list[
                   name=f"{kind}{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
 
 
+def fixed_point(p, q, angle_rad: float) -> np.ndarray | None:
+    """The fixed point (x, y) of the rotation by ``angle_rad`` that takes the point ``p`` to ``q``
+    (the centre on the chord's perpendicular bisector; its midpoint for half a turn). None for no turn."""
+    if abs(angle_rad) < 1e-9:
+        return None
+    p, q = np.asarray(p[:2], float), np.asarray(q[:2], float)
+    e = q - p
+    n = np.array([-e[1], e[0]])        # the chord turned +90 deg (length d): the centre lies on its side
+    return 0.5 * (p + q) + n * (0.5 / math.tan(0.5 * angle_rad))
+
+
 def pivot_point(pose: np.ndarray, goal: PartGoal, angle_rad: float) -> np.ndarray | None:
     """The fixed point (x, y) of the rigid motion that turns ``pose`` by ``angle_rad`` (the goal angle's
     error, the way to turn) and takes its position to the goal's: turned about it by that angle, the
     part arrives at its goal pose. None for no turn."""
-    if abs(angle_rad) < 1e-9:
-        return None
-    p, q = np.asarray(pose[:2], float), np.array([goal.x_m, goal.y_m])
-    e = q - p
-    n = np.array([-e[1], e[0]])        # the chord turned +90 deg (length d): the centre lies on its side
-    return 0.5 * (p + q) + n * (0.5 / math.tan(0.5 * angle_rad))
+    return fixed_point(pose, (goal.x_m, goal.y_m), angle_rad)
+
+
+def pair_rotation(pa, pb, ga, gb) -> tuple[np.ndarray | None, float]:
+    """Two parts at ``pa``, ``pb`` (x, y) with goals ``ga``, ``gb``: the angle (rad, signed) their
+    segment has to turn to lie as the goals' does, and the fixed point of the rotation by it that
+    takes the segment's midpoint to the goals' (None for no turn). Turned about it, both parts move
+    towards their goals together; for a swap (half a turn) it is about the midpoint between them."""
+    pa, pb, ga, gb = (np.asarray(v[:2], float) for v in (pa, pb, ga, gb))
+    u, w = pb - pa, gb - ga
+    angle = math.atan2(u[0] * w[1] - u[1] * w[0], float(u @ w))
+    return fixed_point(0.5 * (pa + pb), 0.5 * (ga + gb), angle), angle
 
 
 def _template_pivot(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
@@ -553,7 +577,8 @@ def base_kinds(settings: MpcSettings | None = None) -> list[str]:
     """The centre designs ``settings`` (its templates and pair lines) uses: what a node designs when
     it configures, so the first replanning step does not pay them."""
     s = settings or MpcSettings()
-    kinds = {TEMPLATE_BASES[k] for k in s.templates} | ({"line_sink"} if s.pair_lines else set())
+    kinds = ({TEMPLATE_BASES[k] for k in s.templates} | ({"line_sink"} if s.pair_lines else set())
+             | ({"rotation"} if s.swap_from_rad > 0 else set()))
     return [k for k in BASE_KINDS if k in kinds]
 
 
@@ -969,6 +994,7 @@ class MultiTask:
         for a in range(len(near)):   # two parts there: a field that vanishes on the line through them
             for b in range(a + 1, len(near)):
                 candidates.append(line_through(self, near[a], near[b]))
+        candidates += self._pair_rotations(poses, statuses)
         costs, vels = self._costs(candidates, poses, statuses)
         costs = np.concatenate([current_cost, costs])
         pool = [self.current] + candidates
@@ -1282,6 +1308,25 @@ class MultiTask:
             return None
         c = pivot_point(pose, goal, a)
         return c if c is not None and float(np.hypot(*c)) <= s.region_radius_m else None
+
+    def _pair_rotations(self, poses: np.ndarray, statuses: list[PartStatus]) -> list[PlateMotion]:
+        """``MpcSettings.swap_from_rad``: for every two unfinished, seen parts whose segment has to turn
+        at least that much, the rotation design moved to the fixed point of that turn (``pair_rotation``,
+        within ``region_radius_m`` of the centre), both ways."""
+        s = self.settings
+        if not s.swap_from_rad > 0:
+            return []
+        moving = [g for g, st in zip(self.goals, statuses)
+                  if not st.within and g.index not in self.unseen and np.all(np.isfinite(poses[g.index]))]
+        out = []
+        for i, a in enumerate(moving):
+            for b in moving[i + 1:]:
+                c, angle = pair_rotation(poses[a.index], poses[b.index], (a.x_m, a.y_m), (b.x_m, b.y_m))
+                if c is None or abs(angle) < s.swap_from_rad or float(np.hypot(*c)) > s.region_radius_m:
+                    continue
+                out += [moved(self._base("rotation"), float(c[0]), float(c[1]), mirror=reverse,
+                              name=f"swap{'-' if reverse else '+'}@{a.index},{b.index}") for reverse in (False, True)]
+        return out
 
     def _waypoints(self, poses: np.ndarray, statuses: list[PartStatus]) -> tuple[np.ndarray, np.ndarray]:
         """Per goal: the target configuration after the horizon (G, 3) and the weights (G,)."""

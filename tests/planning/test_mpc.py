@@ -618,7 +618,10 @@ def test_the_node_designs_only_the_centre_designs_its_templates_use():
 
     assert set(TEMPLATE_BASES) == set(TEMPLATES)
     assert base_kinds() == ["sink", "rotation", "transport"]
-    assert base_kinds(MpcSettings(templates=("sink", "line"), pair_lines=True)) == ["sink", "line_sink"]
+    assert base_kinds(MpcSettings(templates=("sink", "line"), pair_lines=True, swap_from_rad=0.0)) == \
+        ["sink", "line_sink"]
+    # The pair rotations (swap_from_rad, on by default) are the rotation design moved.
+    assert base_kinds(MpcSettings(templates=("sink", "line"), pair_lines=True)) == ["sink", "rotation", "line_sink"]
     with pytest.raises(ConfigError, match="templates: unknown kind 'spiral'"):
         MpcSettings(templates=("sink", "spiral"))
 

@@ -109,11 +109,14 @@ def test_a_motion_out_of_the_budget_is_solved_again_without_it_and_others_are_no
 
 @pytest.mark.parametrize("poses", [[[0.04, 0.03, 0.0], [-0.03, -0.02, 0.0]], [[-0.05, 0.0, 0.0], [0.0, 0.045, 0.0]]])
 def test_the_budget_changes_nothing_where_every_probe_converges_within_it(poses):
-    """Point parts (washers) converge in a few steps: the budgeted plan is the plan without it."""
+    """Point parts (washers) converge in a few steps: the budgeted plan is the plan without it. (Not
+    with the pair rotations, swap_from_rad: from the first poses the Gauss-Newton search starts at the
+    rotation about a point between the washers, and one of its probes needs more than the budget.)"""
     goals = [PartGoal(0, 0.02, -0.02), PartGoal(1, -0.03, 0.03)]
     parts = [PointPart(0.3), PointPart(0.25)]
     plans = []
-    for settings in (MpcSettings(), MpcSettings(probe_max_steps_per_period=0, probe_max_periods=0)):
+    for settings in (MpcSettings(swap_from_rad=0.0),
+                     MpcSettings(swap_from_rad=0.0, probe_max_steps_per_period=0, probe_max_periods=0)):
         physics.WARM_STARTS.clear()   # the same warm starts for both
         task = MultiTask(parts, goals, timeout_s=30.0, settings=settings)
         step = task.step(0.0, poses)

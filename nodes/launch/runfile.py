@@ -1,8 +1,9 @@
 """Where a running ``ppod up`` says what it started (so ``ppod estop`` finds the simulator's bus).
 
 ``$PPOD_RUN_DIR/stack.yaml`` (default ``/tmp/ppod-$UID/stack.yaml``) holds the launcher's pid, the
-mode and, with ``--sim``, the simulated device's CAN bridge URL. It is removed when the stack stops;
-a file whose pid is gone is ignored.
+mode, its ROS domain and, with ``--sim``, the simulated device's CAN bridge URL. It is removed when
+the stack stops; a file whose pid is gone is ignored. A second stack in the same ROS domain is
+refused (``Stack.start``): the two would share node, service and topic names.
 """
 
 from __future__ import annotations

@@ -84,13 +84,21 @@ class Stack:
         """
         if not self.nodes:
             raise DeviceError("no nodes selected to start")
+        domain = self.env.get("ROS_DOMAIN_ID", "0")
+        other = runfile.read()
+        if other is not None and other.get("pid") != os.getpid() and str(other.get("domain", "0")) == domain:
+            # Two stacks in one domain share node, service and topic names: the lifecycle requests
+            # reach the other stack's nodes (measured: "configure failed" as its response timed out).
+            raise DeviceError(f"another ppod stack is running in ROS domain {domain} (launcher pid "
+                              f"{other.get('pid')}, {runfile.run_dir() / 'stack.yaml'}): stop it first, or "
+                              f"start this one with another ROS_DOMAIN_ID")
         mode = "simulated device" if self.sim else "hardware"
         self.supervisor.say(f"starting {len(self.nodes)} nodes against the {mode} "
                             f"(DDS discovery {self.env['ROS_AUTOMATIC_DISCOVERY_RANGE']}, "
                             f"domain {self.env.get('ROS_DOMAIN_ID', '0')}); config {self.spec.origin}")
         for node in self.nodes:
             self.supervisor.start(node)
-        runfile.write({"sim": self.sim, "nodes": [n.name for n in self.nodes],
+        runfile.write({"sim": self.sim, "domain": domain, "nodes": [n.name for n in self.nodes],
                        "sim_bridge": f"ws://127.0.0.1:{self.substitutions['sim_port']}/" if self.sim else None})
         managed = [n for n in self.nodes if n.lifecycle]
         if activate and managed:

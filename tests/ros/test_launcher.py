@@ -146,3 +146,49 @@ def test_realtime_priority_outside_0_to_99_is_one_clear_error():
 
     with pytest.raises(ConfigError, match=r"nodes\[0\].realtime_priority"):
         launch_spec_from_dict({"nodes": [{"name": "a", "module": "x", "realtime_priority": 100}]})
+
+
+@pytest.mark.parametrize("domain, refused", [("same", True), ("other", False)])
+def test_a_second_stack_in_the_same_ros_domain_is_refused_before_it_starts_anything(tmp_path, monkeypatch,
+                                                                                      domain, refused):
+    # Two stacks in one domain share node, service and topic names: a second `ppod demo` started
+    # beside a running one failed with "waveform_generator: configure failed" (its lifecycle
+    # response timed out). The second is refused with the reason; another domain is fine.
+    import io
+    import os
+    import subprocess
+    import sys
+
+    from ppod_nodes.launch import runfile
+    from ppod_nodes.launch.spec import launch_spec_from_dict
+    from ppod_nodes.launch.stack import Stack
+    from ppod_ros.errors import DeviceError
+
+    monkeypatch.setenv("PPOD_RUN_DIR", str(tmp_path))
+    mine = os.environ.get("ROS_DOMAIN_ID", "0")
+    launcher = subprocess.Popen([sys.executable, "-m", "tests.support.sleeper"], cwd=ROOT)  # the other stack
+    try:
+        (tmp_path / "stack.yaml").write_text(
+            f"pid: {launcher.pid}\nsim: true\ndomain: '{mine if domain == 'same' else str(int(mine) + 1)}'\n")
+        assert runfile.read() is not None
+        spec = launch_spec_from_dict({"shutdown_timeout_s": 5, "nodes": [
+            {"name": "sleeper", "module": "tests.support.sleeper", "lifecycle": False}]})
+        out = io.StringIO()
+        stack = Stack(spec, sim=True, out=out, handle_signals=False)
+        try:
+            if refused:
+                with pytest.raises(DeviceError, match=f"another ppod stack is running in ROS domain {mine} "
+                                                      f"\\(launcher pid {launcher.pid}"):
+                    stack.start()
+                assert stack.supervisor.children == []
+                assert runfile.read()["pid"] == launcher.pid       # the running stack's file is kept
+            else:
+                stack.start()
+                assert [c.spec.name for c in stack.supervisor.children] == ["sleeper"]
+                info = runfile.read()
+                assert info["pid"] == os.getpid() and info["domain"] == mine
+        finally:
+            stack.stop()
+    finally:
+        launcher.kill()
+        launcher.wait(10)

@@ -95,7 +95,7 @@ class Stack:
         mode = "simulated device" if self.sim else "hardware"
         self.supervisor.say(f"starting {len(self.nodes)} nodes against the {mode} "
                             f"(DDS discovery {self.env['ROS_AUTOMATIC_DISCOVERY_RANGE']}, "
-                            f"domain {self.env.get('ROS_DOMAIN_ID', '0')}); config {self.spec.origin}")
+                            f"domain {domain}); config {self.spec.origin}")
         for node in self.nodes:
             self.supervisor.start(node)
         runfile.write({"sim": self.sim, "domain": domain, "nodes": [n.name for n in self.nodes],

@@ -484,8 +484,14 @@ def _template_rotation(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> 
     prediction chooses."""
     if goal.theta_rad is None:
         return []
-    return [moved(planner._base("rotation"), float(pose[0]), float(pose[1]), mirror=reverse,
-                  name=f"turn{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
+    return both_ways(planner._base("rotation"), pose[:2], "turn", str(goal.index))
+
+
+def both_ways(base: PlateMotion, centre, kind: str, tag: str) -> list[PlateMotion]:
+    """``base`` (designed about the centre) moved to ``centre`` as it is and mirrored, named
+    ``kind+@tag`` / ``kind-@tag``: the design and the other way round (``moved``)."""
+    return [moved(base, float(centre[0]), float(centre[1]), mirror=reverse,
+                  name=f"{kind}{'-' if reverse else '+'}@{tag}") for reverse in (False, True)]
 
 
 def spin_motion(settings: MpcSettings) -> PlateMotion:
@@ -502,14 +508,7 @@ def _template_spin(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list
     """A rigid part turned in place, both ways: the spin (fitted at the centre) moved to the part."""
     if goal.theta_rad is None or not isinstance(planner.parts[goal.index], RigidPart):
         return []
-    return _spins_about(planner, goal, pose[:2], "spin")
-
-
-def _spins_about(planner: MultiTask, goal: PartGoal, centre, kind: str) -> list[PlateMotion]:
-    """The spin (fitted at the centre) moved to ``centre``, both ways, named ``kind+@i`` / ``kind-@i``."""
-    base = planner._fitted(spin_motion(planner.settings))
-    return [moved(base, float(centre[0]), float(centre[1]), mirror=reverse,
-                  name=f"{kind}{'-' if reverse else '+'}@{goal.index}") for reverse in (False, True)]
+    return both_ways(planner._fitted(spin_motion(planner.settings)), pose[:2], "spin", str(goal.index))
 
 
 def fixed_point(p, q, angle_rad: float) -> np.ndarray | None:
@@ -545,7 +544,8 @@ def _template_pivot(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> lis
     """A rigid part turned about its pivot (MpcSettings.pivot_from_rad), both ways: the spin moved to
     the pivot, where the part turns as in place and is carried along the circle about it."""
     c = planner._pivot(goal, pose)
-    return [] if c is None else _spins_about(planner, goal, c, "pivot")
+    return [] if c is None else both_ways(planner._fitted(spin_motion(planner.settings)), c, "pivot",
+                                          str(goal.index))
 
 
 def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
@@ -574,7 +574,7 @@ TEMPLATE_BASES: dict[str, str | None] = {"sink": "sink", "transport": "transport
 
 
 def base_kinds(settings: MpcSettings | None = None) -> list[str]:
-    """The centre designs ``settings`` (its templates and pair lines) uses: what a node designs when
+    """The centre designs ``settings`` (its templates, pair lines and pair rotations) uses: what a node designs when
     it configures, so the first replanning step does not pay them."""
     s = settings or MpcSettings()
     kinds = ({TEMPLATE_BASES[k] for k in s.templates} | ({"line_sink"} if s.pair_lines else set())
@@ -1324,8 +1324,7 @@ class MultiTask:
                 c, angle = pair_rotation(poses[a.index], poses[b.index], (a.x_m, a.y_m), (b.x_m, b.y_m))
                 if c is None or abs(angle) < s.swap_from_rad or float(np.hypot(*c)) > s.region_radius_m:
                     continue
-                out += [moved(self._base("rotation"), float(c[0]), float(c[1]), mirror=reverse,
-                              name=f"swap{'-' if reverse else '+'}@{a.index},{b.index}") for reverse in (False, True)]
+                out += both_ways(self._base("rotation"), c, "swap", f"{a.index},{b.index}")
         return out
 
     def _waypoints(self, poses: np.ndarray, statuses: list[PartStatus]) -> tuple[np.ndarray, np.ndarray]:

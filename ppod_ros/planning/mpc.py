@@ -96,6 +96,11 @@ class MpcSettings:
     clearance_m: float = 0.002            # predicted footprints closer than this are penalised
     collision_weight: float = 5.0
     gauss_newton_steps: int = 2
+    line_search: str = "first"            # "first": the first of the step lengths 1, 1/2, 1/4 that lowers the
+                                          # cost, each fitted and solved only if the longer ones did not; "best":
+                                          # all three fitted and solved, the cheapest taken. Benchmark scenes,
+                                          # seeds 0 and 1, side by side: four parts 23/40 against 22/40, three
+                                          # 37/40 against 38/40, searched steps' CPU median 8-10 % lower
     fd_step: float = 0.03                 # finite-difference step, relative to the axis scales
     max_change: float = 0.6               # trust region per step, relative to the axis scales
     min_amplitude: float = 0.8            # searched motions keep at least this fraction of the template
@@ -262,6 +267,8 @@ class MpcSettings:
         unknown = [k for k in self.templates if k not in TEMPLATES]
         if unknown:
             raise ConfigError(f"templates: unknown kind {unknown[0]!r}; expected some of {', '.join(TEMPLATES)}")
+        if self.line_search not in ("best", "first"):
+            raise ConfigError(f"line_search: expected 'best' or 'first', got {self.line_search!r}")
         if self.harmonics not in (1, 2):
             raise ConfigError(f"harmonics: expected 1 or 2, got {self.harmonics!r}")
         if not (isinstance(self.two_harmonics_from_parts, int) and self.two_harmonics_from_parts >= 0):
@@ -1564,12 +1571,17 @@ class MultiTask:
                 if 0 < norm_t < floor:
                     vt = vt * (floor / norm_t)
                 trials.append(_to_motion(vt, freq, harmonics, name="mpc"))
-            trials = [m for m, _ in fit_envelope_many(trials, self.device, s.headroom, tolerance=s.plant_tolerance)]
-            costs, _ = self._costs(trials, poses, statuses, budget=True)
-            j = int(np.argmin(costs))
-            if not costs[j] < best_cost:
+            taken = None
+            for batch in ([trials] if s.line_search == "best" else [[t] for t in trials]):
+                fitted = [m for m, _ in fit_envelope_many(batch, self.device, s.headroom, tolerance=s.plant_tolerance)]
+                costs, _ = self._costs(fitted, poses, statuses, budget=True)
+                j = int(np.argmin(costs))
+                if costs[j] < best_cost:
+                    taken = fitted[j], float(costs[j])
+                    break
+            if taken is None:
                 break
-            best, best_cost = trials[j], float(costs[j])
+            best, best_cost = taken
             v = _to_vector(best, harmonics)
         return (best if best is not start else None), best_cost
 

@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
@@ -210,6 +210,13 @@ class MpcSettings:
                                           # one motion, 0.9 under the next (the translation scale said 0.4) and
                                           # overshot its goal angle by 17 deg; one turn scale for every motion
                                           # kept a motion turning at 0.2 of the model for 15-20 s (scenes 2, 15)
+    turn_scale_by_name: bool = True       # a part's turn scale is also kept per motion name (a template
+                                          # moved to the part, "spin-@0", or the refined "mpc"): a motion
+                                          # not playing is ranked with its name's, where one was learned (a
+                                          # bracket of friction 0.44 turned at 7 deg/s under refined motions,
+                                          # 11-18 deg/s under the spin). Benchmark scenes, seeds 0 and 1, side
+                                          # by side: one bracket worst 15.8 / 16.7 s against 17.2 / 17.5 s,
+                                          # three parts 39/40 against 37/40, four 23/40 either way
     min_predicted_turn_rad: float = 0.0175  # predicted turns smaller than this (1 deg, 10 times the tracker's
                                           # angle noise) teach the turn scales nothing
     turn_scale_range: tuple[float, float] = (0.1, 4.0)  # the motion playing: a weak turn whose contacts
@@ -615,6 +622,7 @@ class _Tracked:
     estimated: bool = False      # the scale has been estimated from a motion at least once
     turn: float = 1.0            # the turn's velocity scale over every motion (MpcSettings.turn_scale)
     turn_now: tuple[bytes, float] | None = None  # ... and under one motion (its key): the one playing
+    turn_by_name: dict = field(default_factory=dict)  # ... and per motion name (turn_scale_by_name)
     last_seen: float | None = None
 
 
@@ -838,7 +846,7 @@ class MultiTask:
             d = poses[g.index, :2] - seg.poses[g.index, :2]
             st = self.state[g.index]
             if s.turn_scale and g.theta_rad is not None:
-                self._estimate_turn(st, seg.motion_key, float(disp[k, 2]),
+                self._estimate_turn(st, seg.motion_key, self.current.name, float(disp[k, 2]),
                                     float(_wrap(poses[g.index, 2] - seg.poses[g.index, 2], self.symmetry[g.index])))
             elif s.scale_from_turn and g.theta_rad is not None:
                 # The turn too, at the part's radius: learned from the translation alone, a bracket
@@ -854,7 +862,7 @@ class MultiTask:
             st.scale = float(np.clip(st.scale + s.scale_gain * (ratio - st.scale), *s.scale_range))
             st.estimated = True
 
-    def _estimate_turn(self, st: _Tracked, key: bytes, predicted_rad: float, turned_rad: float) -> None:
+    def _estimate_turn(self, st: _Tracked, key: bytes, name: str, predicted_rad: float, turned_rad: float) -> None:
         """The turn's velocity scales from one segment of the motion ``key``: the part's turn against
         the predicted one (``predicted_rad``, ramp included, unscaled), when that is at least
         ``min_predicted_turn_rad`` (a weak predicted turn says nothing against the tracker's noise);
@@ -866,6 +874,9 @@ class MultiTask:
         st.turn = float(np.clip(st.turn + s.scale_gain * (ratio - st.turn), *s.scale_range))
         now = st.turn_now[1] if st.turn_now is not None and st.turn_now[0] == key else st.turn
         st.turn_now = (key, float(np.clip(now + s.scale_gain * (ratio - now), *s.turn_scale_range)))
+        if s.turn_scale_by_name and name:
+            was = st.turn_by_name.get(name, now)
+            st.turn_by_name[name] = float(np.clip(was + s.scale_gain * (ratio - was), *s.turn_scale_range))
 
     def _axis_scales(self, motions: Sequence[PlateMotion] | None = None) -> np.ndarray:
         """The velocity scales of x, y and theta per goal (G, 3), or per motion and goal (M, G, 3):
@@ -881,6 +892,9 @@ class MultiTask:
                 if g.theta_rad is None:
                     continue
                 out[:, k, 2] = st.turn
+                if st.turn_by_name:
+                    for m, motion in enumerate(motions):
+                        out[m, k, 2] = st.turn_by_name.get(motion.name, st.turn)
                 if st.turn_now is not None:
                     out[[m.key == st.turn_now[0] for m in motions], k, 2] = st.turn_now[1]
         return out[0] if one else out

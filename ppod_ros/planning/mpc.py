@@ -100,7 +100,7 @@ class MpcSettings:
                                           # cost, each fitted and solved only if the longer ones did not; "best":
                                           # all three fitted and solved, the cheapest taken. Benchmark scenes,
                                           # seeds 0 and 1, side by side: four parts 23/40 against 22/40, three
-                                          # 37/40 against 38/40, searched steps' CPU median 8-10 % lower
+                                          # 37/40 against 38/40, searched steps' CPU median 4-10 % lower
     fd_step: float = 0.03                 # finite-difference step, relative to the axis scales
     max_change: float = 0.6               # trust region per step, relative to the axis scales
     min_amplitude: float = 0.8            # searched motions keep at least this fraction of the template

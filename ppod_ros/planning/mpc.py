@@ -522,7 +522,7 @@ def _template_spin(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list
     """A rigid part turned in place, both ways: the spin (fitted at the centre) moved to the part."""
     if goal.theta_rad is None or not isinstance(planner.parts[goal.index], RigidPart):
         return []
-    return both_ways(planner._fitted(spin_motion(planner.settings)), pose[:2], "spin", str(goal.index))
+    return both_ways(planner._spin(), pose[:2], "spin", str(goal.index))
 
 
 def fixed_point(p, q, angle_rad: float) -> np.ndarray | None:
@@ -558,8 +558,7 @@ def _template_pivot(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> lis
     """A rigid part turned about its pivot (MpcSettings.pivot_from_rad), both ways: the spin moved to
     the pivot, where the part turns as in place and is carried along the circle about it."""
     c = planner._pivot(goal, pose)
-    return [] if c is None else both_ways(planner._fitted(spin_motion(planner.settings)), c, "pivot",
-                                          str(goal.index))
+    return [] if c is None else both_ways(planner._spin(), c, "pivot", str(goal.index))
 
 
 def _template_orient(planner: MultiTask, goal: PartGoal, pose: np.ndarray) -> list[PlateMotion]:
@@ -891,10 +890,7 @@ class MultiTask:
                 st = self.state[g.index]
                 if g.theta_rad is None:
                     continue
-                out[:, k, 2] = st.turn
-                if st.turn_by_name:
-                    for m, motion in enumerate(motions):
-                        out[m, k, 2] = st.turn_by_name.get(motion.name, st.turn)
+                out[:, k, 2] = [st.turn_by_name.get(m.name, st.turn) for m in motions]  # by name where learned
                 if st.turn_now is not None:
                     out[[m.key == st.turn_now[0] for m in motions], k, 2] = st.turn_now[1]
         return out[0] if one else out
@@ -1168,6 +1164,11 @@ class MultiTask:
             return False
         gained, had = rest - new, max(rest - current, 0.0)
         return gained > 0 and gained - had > g * gained
+
+    def _spin(self) -> PlateMotion:
+        """The spin about the centre (``spin_motion``) fitted into the envelope: the spin and pivot
+        templates' design."""
+        return self._fitted(spin_motion(self.settings))
 
     def _fitted(self, motion: PlateMotion) -> PlateMotion:
         return self._fitted_many([motion])[0]

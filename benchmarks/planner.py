@@ -323,7 +323,8 @@ def _switch_deviations(records: list, run, goals, first: int | None = None) -> l
         for row in range(i0 + 1, len(times)):
             if times[row] > te + 1e-9:
                 break
-            d = ramped_displacement(rec["previous"], rec["velocity"], times[row] - ts, rec["ramp_s"])
+            d = ramped_displacement(rec["previous"], rec["velocity"], times[row] - ts, rec["ramp_s"],
+                                    rec.get("middle"))
             for g, goal in enumerate(goals):
                 pred = traj[i0, goal.index, :2] + d[g, :2]
                 worst[g] = max(worst[g], float(np.hypot(*(traj[row, goal.index, :2] - pred))))

@@ -379,6 +379,27 @@ def acceleration_error(goal: np.ndarray, achieved: np.ndarray, length_scale_m: f
     return float(e), float(e / g) if g > 0 else (0.0 if e == 0 else math.inf)
 
 
+def crossfade(old: PlateMotion | None, new: PlateMotion, a: float) -> PlateMotion:
+    """The plate motion the generator's ramp from ``old`` to ``new`` plays at fraction ``a`` (0..1):
+    the two tables mixed, ``(1 - a) old + a new`` (the plant is linear, so the plate motion mixes as
+    the currents do); from rest (``old`` None or zero) ``new`` scaled by ``a``; to rest ``old`` by
+    ``1 - a``; between two frequencies ``old`` faded out over the first half and ``new`` in over the
+    second. Velocity fields are far from linear in the motion, so the parts' velocity under the mix
+    is not the mix of their velocities (``MpcSettings.ramp_midpoint``)."""
+    if a >= 1.0 or old is None:
+        return new.scaled(a) if old is None and a < 1.0 else new
+    if new.is_zero() or old.is_zero() or abs(new.frequency_hz - old.frequency_hz) > 1e-9:
+        if new.is_zero() and not old.is_zero():
+            return old.scaled(1.0 - a)
+        if old.is_zero():
+            return new.scaled(a)
+        return old.scaled(1.0 - 2 * a) if a < 0.5 else new.scaled(2 * a - 1.0)
+    k = sorted(set(old.k.tolist()) | set(new.k.tolist()))
+    Xo, Xn = old.phasor_table(max(k)), new.phasor_table(max(k))
+    X = (1 - a) * Xo + a * Xn
+    return PlateMotion.from_phasors(new.frequency_hz, np.arange(1, max(k) + 1), X, name=new.name)
+
+
 def _motion_key(frequency_hz: float, k: np.ndarray, amplitude: np.ndarray, phase: np.ndarray) -> bytes:
     """:attr:`PlateMotion.key` of validated arrays."""
     h = hashlib.sha1()
@@ -401,5 +422,6 @@ __all__ = [
     "MAX_HARMONIC",
     "PlateMotion",
     "acceleration_error",
+    "crossfade",
     "point_kinematics",
 ]

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ppod_ros.actuation.corrections import limit_over
-from ppod_ros.motion import PlateMotion
+from ppod_ros.motion import PlateMotion, crossfade
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import PartDynamics
 from ppod_ros.planning.sensorless import SensorlessTask
@@ -183,22 +183,6 @@ class ActuatorPlantError:
         return PlateMotion.from_phasors(motion.frequency_hz, motion.k, X + (1.0 - s) * (P - X), name=motion.name)
 
 
-def _blend(old, new, a: float):
-    """The generator's ramp from ``old`` to ``new`` at fraction ``a`` (0..1)."""
-    if a >= 1.0 or old is None:
-        return new.scaled(a) if old is None and a < 1.0 else new
-    if new.is_zero() or old.is_zero() or abs(new.frequency_hz - old.frequency_hz) > 1e-9:
-        if new.is_zero() and not old.is_zero():
-            return old.scaled(1.0 - a)
-        if old.is_zero():
-            return new.scaled(a)
-        return old.scaled(1.0 - 2 * a) if a < 0.5 else new.scaled(2 * a - 1.0)
-    k = sorted(set(old.k.tolist()) | set(new.k.tolist()))
-    Xo, Xn = old.phasor_table(max(k)), new.phasor_table(max(k))
-    X = (1 - a) * Xo + a * Xn
-    return PlateMotion.from_phasors(new.frequency_hz, np.arange(1, max(k) + 1), X, name=new.name)
-
-
 def _ramp(motion, default_s: float) -> float:
     """The ramp to ``motion``: its own ``ramp_time_s`` when it has one, else the default (as the
     generator does); none without a default (the plate switches at once)."""
@@ -276,7 +260,7 @@ def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | Rig
             if motion is None and dyn.time_s != t:   # the first motion plays late: the parts rested till now
                 dyn = PartDynamics(list(parts), dyn.state.configurations, time_s=t)
             r = _ramp(motion, ramp_s)
-            previous = _blend(previous, motion, min(1.0, (t - switched_at) / r)) if r > 0 and motion \
+            previous = crossfade(previous, motion, min(1.0, (t - switched_at) / r)) if r > 0 and motion \
                 is not None else motion
             motion, motions, switched_at = new, motions + 1, t
             switches.append(t)
@@ -287,7 +271,7 @@ def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | Rig
             played = motion
             r = _ramp(motion, ramp_s)
             if r > 0 and since < r:
-                played = _blend(previous, motion, min(1.0, (since + 0.5 * dt_s) / r))
+                played = crossfade(previous, motion, min(1.0, (since + 0.5 * dt_s) / r))
             if plant is not None:
                 played = plant.played(played, since, motions)
             if played is not None:

@@ -722,7 +722,9 @@ def test_an_unlearned_motion_is_predicted_with_the_uncorrected_plants_and_the_pr
     assert np.all(np.abs(late - 1.0) <= np.abs(ratio - 1.0) * 0.1 + 1e-12)
     # The recorded prediction is the model's velocity times that factor (and the part's scale).
     nominal = predict.predict_velocities([motion], task.parts[0], pose[:, :2])[0][0, 0]
-    np.testing.assert_allclose(task.last_prediction["velocity"][0, :2], nominal * ratio[0, :2], rtol=1e-6)
+    # (To the solver's tolerance: its warm starts are shared between calls, and the switch solved the
+    # ramp's midpoint, MpcSettings.ramp_midpoint, since the planner solved the motion.)
+    np.testing.assert_allclose(task.last_prediction["velocity"][0, :2], nominal * ratio[0, :2], rtol=2e-5)
     # A motion after the first `unlearned_motions` has no first error.
     assert task._plant_factor(PlateMotion.zero(30.0), 0.0).tolist() == np.ones((1, 3)).tolist()
 

@@ -154,9 +154,9 @@ def test_the_fitted_candidates_are_budgeted_only_when_asked():
             _out.extend(m.key for m in out)
             return out
 
-        def spy_costs(motions, poses, statuses, budget=False, _out=costs, _real=real_costs):
+        def spy_costs(motions, poses, statuses, budget=False, ramped=False, _out=costs, _real=real_costs):
             _out.append(([m.key for m in motions], budget))
-            return _real(motions, poses, statuses, budget)
+            return _real(motions, poses, statuses, budget, ramped)
 
         task._fitted_many, task._costs = spy_fitted, spy_costs
         task.step(0.0, [[0.04, 0.03, 1.2]])

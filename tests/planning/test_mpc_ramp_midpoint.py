@@ -2,10 +2,11 @@
 
 Regression (``ppod bench planner --sections multipart``, one bracket, seed 1, scene 1): the planner
 switched from a turn to a weak motion with the bracket 1.4 mm from its goal. It predicted the ramp
-from the two motions' velocities crossfaded linearly: 0.3 mm. The bracket moved 4.1 mm, because
+from the two motions' velocities crossfaded linearly: 0.7 mm. The bracket moved 4.3 mm, because
 half-way through the generator's crossfade the plate plays a motion under which the model itself
-moves it at 8.9 mm/s (neither motion moves it faster than 4.4 mm/s). The velocity-scale estimate then
-read that as a part 2.8 times faster than the model and threw it again.
+moves it at 9.1 mm/s, faster than either motion does (6.1 and 3.5 mm/s) and another way. The
+velocity-scale estimate then read the bracket as four times faster than the model (the range's
+limit; its scale jumped from 0.9 to 2.8) and the next motions threw it again.
 """
 
 from __future__ import annotations

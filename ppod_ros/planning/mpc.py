@@ -226,6 +226,10 @@ class MpcSettings:
                                           # 11-18 deg/s under the spin). Benchmark scenes, seeds 0 and 1, side
                                           # by side: one bracket worst 15.8 / 16.7 s against 17.2 / 17.5 s,
                                           # three parts 39/40 against 37/40, four 23/40 either way
+    scale_by_name: str = "off"            # a part's translation scale is also kept per motion name, as the
+                                          # turn's (``turn_scale_by_name``): a motion is ranked with its
+                                          # name's where one was learned, the part's otherwise; "rigid": for
+                                          # rigid parts, "all": for every part, "off"
     min_predicted_turn_rad: float = 0.0175  # predicted turns smaller than this (1 deg, 10 times the tracker's
                                           # angle noise) teach the turn scales nothing
     turn_scale_range: tuple[float, float] = (0.1, 4.0)  # the motion playing: a weak turn whose contacts
@@ -283,6 +287,8 @@ class MpcSettings:
         unknown = [k for k in self.templates if k not in TEMPLATES]
         if unknown:
             raise ConfigError(f"templates: unknown kind {unknown[0]!r}; expected some of {', '.join(TEMPLATES)}")
+        if self.scale_by_name not in ("off", "rigid", "all"):
+            raise ConfigError(f"scale_by_name: expected 'off', 'rigid' or 'all', got {self.scale_by_name!r}")
         if self.ramp_midpoint not in ("off", "estimate", "plan"):
             raise ConfigError(f"ramp_midpoint: expected 'off', 'estimate' or 'plan', got {self.ramp_midpoint!r}")
         if self.line_search not in ("best", "first"):
@@ -633,6 +639,7 @@ class _Tracked:
     turn: float = 1.0            # the turn's velocity scale over every motion (MpcSettings.turn_scale)
     turn_now: tuple[bytes, float] | None = None  # ... and under one motion (its key): the one playing
     turn_by_name: dict = field(default_factory=dict)  # ... and per motion name (turn_scale_by_name)
+    scale_by_name: dict = field(default_factory=dict)  # the translation's per motion name (scale_by_name)
     last_seen: float | None = None
 
 
@@ -888,6 +895,9 @@ class MultiTask:
             if not np.all(np.isfinite(d)) or n2 < s.min_predicted_m ** 2:
                 continue
             ratio = float(np.clip((d @ pred) / n2, *s.scale_range))
+            if self._by_name(g) and self.current.name:
+                was = st.scale_by_name.get(self.current.name, st.scale)
+                st.scale_by_name[self.current.name] = float(np.clip(was + s.scale_gain * (ratio - was), *s.scale_range))
             st.scale = float(np.clip(st.scale + s.scale_gain * (ratio - st.scale), *s.scale_range))
             st.estimated = True
 
@@ -907,6 +917,11 @@ class MultiTask:
             was = st.turn_by_name.get(name, now)
             st.turn_by_name[name] = float(np.clip(was + s.scale_gain * (ratio - was), *s.turn_scale_range))
 
+    def _by_name(self, g: PartGoal) -> bool:
+        """Whether the part of ``g`` keeps its translation scale per motion name (``scale_by_name``)."""
+        by = self.settings.scale_by_name
+        return by == "all" or (by == "rigid" and isinstance(self.parts[g.index], RigidPart))
+
     def _axis_scales(self, motions: Sequence[PlateMotion] | None = None) -> np.ndarray:
         """The velocity scales of x, y and theta per goal (G, 3), or per motion and goal (M, G, 3):
         the translation's scale; for a part with a goal angle (``turn_scale``), its turn's over every
@@ -915,6 +930,13 @@ class MultiTask:
         motions = [self.current] if one else motions
         out = np.array([[self.state[g.index].scale] * 3 for g in self.goals]).reshape(1, len(self.goals), 3)
         out = np.repeat(out, len(motions), axis=0)
+        if self.settings.scale_by_name != "off":
+            for k, g in enumerate(self.goals):
+                named = self.state[g.index].scale_by_name
+                if named and self._by_name(g):
+                    out[:, k, :2] = np.array([named.get(m.name, out[0, k, 0]) for m in motions])[:, None]
+                    if g.theta_rad is None or not self.settings.turn_scale:
+                        out[:, k, 2] = out[:, k, 0]
         if self.settings.turn_scale:
             for k, g in enumerate(self.goals):
                 st = self.state[g.index]

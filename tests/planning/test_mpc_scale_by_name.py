@@ -13,7 +13,8 @@ import pytest
 
 from ppod_ros.errors import ConfigError
 from ppod_ros.parts import PointPart, published_rigid_part
-from ppod_ros.planning.mpc import MpcSettings, MultiTask, PartGoal, _Segment, moved
+from ppod_ros.planning.mpc import MpcSettings, MultiTask, PartGoal, _Segment
+from tests.support.named_motions import named_motions
 
 
 def _task(by_name: str, rigid: bool = False) -> MultiTask:
@@ -38,9 +39,7 @@ def test_each_name_keeps_the_translation_scale_learned_under_it(by_name, rigid):
     task = _task(by_name, rigid)
     on = by_name == "all" or (by_name == "rigid" and rigid)
     sink = task._base("sink")
-    sink_here, sink_there = moved(sink, 0.01, 0.0, name="sink@0"), moved(sink, 0.02, 0.01, name="sink@0")
-    refined = moved(sink.scaled(0.7), 0.0, 0.01, name="mpc")
-    other = moved(sink.scaled(0.8), 0.0, -0.01, name="carry@0")
+    sink_here, sink_there, refined, other = named_motions(sink, "sink@0", "carry@0")
     _learn(task, sink_here, 0.9)
     _learn(task, refined, 0.4)       # the refined motion plays last
     st = task.state[0]

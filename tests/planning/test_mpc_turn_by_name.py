@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from ppod_ros.parts import published_rigid_part
-from ppod_ros.planning.mpc import MpcSettings, MultiTask, PartGoal, moved, spin_motion
+from ppod_ros.planning.mpc import MpcSettings, MultiTask, PartGoal, spin_motion
+from tests.support.named_motions import named_motions
 
 
 def _task(on: bool) -> MultiTask:
@@ -33,9 +34,7 @@ def _learn(task: MultiTask, motion, ratio: float, times: int = 12) -> None:
 def test_each_name_keeps_the_turn_scale_learned_under_it(on):
     task = _task(on)
     spin = spin_motion(task.settings)
-    spin_here, spin_there = moved(spin, 0.01, 0.0, name="spin-@0"), moved(spin, 0.02, 0.01, name="spin-@0")
-    refined = moved(spin.scaled(0.7), 0.0, 0.01, name="mpc")
-    other = moved(spin.scaled(0.8), 0.0, -0.01, name="sink@0")
+    spin_here, spin_there, refined, other = named_motions(spin, "spin-@0", "sink@0")
     _learn(task, spin_here, 0.6)
     _learn(task, refined, 0.3)       # the refined motion plays last
     st = task.state[0]

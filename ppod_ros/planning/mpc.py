@@ -897,8 +897,8 @@ class MultiTask:
             ratio = float(np.clip((d @ pred) / n2, *s.scale_range))
             if self._by_name(g) and self.current.name:
                 was = st.scale_by_name.get(self.current.name, st.scale)
-                st.scale_by_name[self.current.name] = float(np.clip(was + s.scale_gain * (ratio - was), *s.scale_range))
-            st.scale = float(np.clip(st.scale + s.scale_gain * (ratio - st.scale), *s.scale_range))
+                st.scale_by_name[self.current.name] = self._smoothed(was, ratio, s.scale_range)
+            st.scale = self._smoothed(st.scale, ratio, s.scale_range)
             st.estimated = True
 
     def _estimate_turn(self, st: _Tracked, key: bytes, name: str, predicted_rad: float, turned_rad: float) -> None:
@@ -910,12 +910,15 @@ class MultiTask:
         if not (math.isfinite(turned_rad) and abs(predicted_rad) >= s.min_predicted_turn_rad):
             return
         ratio = turned_rad / predicted_rad
-        st.turn = float(np.clip(st.turn + s.scale_gain * (ratio - st.turn), *s.scale_range))
+        st.turn = self._smoothed(st.turn, ratio, s.scale_range)
         now = st.turn_now[1] if st.turn_now is not None and st.turn_now[0] == key else st.turn
-        st.turn_now = (key, float(np.clip(now + s.scale_gain * (ratio - now), *s.turn_scale_range)))
+        st.turn_now = (key, self._smoothed(now, ratio, s.turn_scale_range))
         if s.turn_scale_by_name and name:
-            was = st.turn_by_name.get(name, now)
-            st.turn_by_name[name] = float(np.clip(was + s.scale_gain * (ratio - was), *s.turn_scale_range))
+            st.turn_by_name[name] = self._smoothed(st.turn_by_name.get(name, now), ratio, s.turn_scale_range)
+
+    def _smoothed(self, was: float, ratio: float, bounds: tuple[float, float]) -> float:
+        """A velocity scale ``was`` moved towards a measured ``ratio`` by ``scale_gain``, within ``bounds``."""
+        return float(np.clip(was + self.settings.scale_gain * (ratio - was), *bounds))
 
     def _by_name(self, g: PartGoal) -> bool:
         """Whether the part of ``g`` keeps its translation scale per motion name (``scale_by_name``)."""
@@ -1528,18 +1531,24 @@ class MultiTask:
         # where the part already is) rules the candidate out.
         cur = np.array([poses[g.index, :2] for g in self.goals])
         r_now = np.hypot(cur[:, 0], cur[:, 1])
-        v_cur = getattr(self, "_v_current", None)
-        v_cur = np.zeros_like(vel[0]) if v_cur is None else v_cur
         scales = np.array([self.state[g.index].scale for g in self.goals])
-        w_old, w_mid, w_new = ramp_weights(self.settings.horizon_s, self.settings.ramp_s, mids is not None)
-        ramp = v_cur[None, :, :2] * w_old + vel[..., :2] * w_new
-        if mids is not None:
-            ramp = ramp + mids[..., :2] * w_mid
-        pred = cur[None] + scales[None, :, None] * ramp
+        pred = cur[None] + scales[None, :, None] * self._horizon_displacement(vel, mids)[..., :2]
         r_pred = np.hypot(pred[..., 0], pred[..., 1])
         out = np.any(r_pred > np.maximum(r_now, self.settings.region_radius_m)[None], axis=1)
         cost[out] = np.inf
         return cost, vel
+
+    def _horizon_displacement(self, vel: np.ndarray, mids: np.ndarray | None) -> np.ndarray:
+        """Per motion and goal (M, G, 3), the unscaled displacement over the horizon after a switch
+        from the motion playing (``_v_current``; none yet: at rest) to each motion of model
+        velocities ``vel`` (M, G, 3), through the generator's ramp (``ramp_weights``; with ``mids``,
+        the velocities half-way through it)."""
+        s = self.settings
+        v_cur = getattr(self, "_v_current", None)
+        v_cur = np.zeros(vel.shape[1:]) if v_cur is None else v_cur
+        w_old, w_mid, w_new = ramp_weights(s.horizon_s, s.ramp_s, mids is not None)
+        disp = v_cur[None] * w_old + vel * w_new
+        return disp if mids is None else disp + mids * w_mid
 
     def _residuals(self, motions, poses, statuses, budget: bool = False, mids: np.ndarray | None = None):
         """Residuals (M, R), model velocities (M, G, 3) and validity (M,) of ``motions``: the
@@ -1552,14 +1561,8 @@ class MultiTask:
         scales = self._axis_scales(motions)
         way, weight = self._waypoints(poses, statuses)
         cur = np.array([poses[g.index] for g in self.goals])
-        v_cur = getattr(self, "_v_current", None)
-        v_cur = np.zeros((G, 3)) if v_cur is None else v_cur
         r = min(s.ramp_s, H)
-        w_old, w_mid, w_new = ramp_weights(H, s.ramp_s, mids is not None)
-        ramp = v_cur[None] * w_old + vel * w_new
-        if mids is not None:
-            ramp = ramp + mids * w_mid
-        pred = cur[None] + scales * ramp  # (M, G, 3)
+        pred = cur[None] + scales * self._horizon_displacement(vel, mids)  # (M, G, 3)
         res_xy = (pred[..., :2] - way[None, :, :2]) * weight[None, :, None]
         oriented = np.array([g.theta_rad is not None for g in self.goals], float)
         res_th = ((pred[..., 2] - way[None, :, 2]) * self._angle_weights(statuses, poses)[None] * oriented[None]

@@ -232,9 +232,9 @@ class _Demo:
 
     def _move(self, ros, track_id: int, stack) -> int:
         from ppod_msgs.action import MovePart
-        from rclpy.action import ActionClient
 
         from ppod_nodes.common import topics
+        from ppod_nodes.common.actions import ActionClient
 
         client = ActionClient(ros.node, MovePart, "/" + topics.MOVE_PART)
         if not client.wait_for_server(timeout_sec=30):

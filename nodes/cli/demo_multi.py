@@ -126,9 +126,9 @@ class MultiDemo(_Demo):
     def _move(self, ros, _track_id: int, stack) -> int:
         from geometry_msgs.msg import Pose2D
         from ppod_msgs.action import MoveParts
-        from rclpy.action import ActionClient
 
         from ppod_nodes.common import topics
+        from ppod_nodes.common.actions import ActionClient
 
         _, truth = self.log.latest_truth()
         _, tracked = self.log.latest_tracked()

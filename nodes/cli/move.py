@@ -41,9 +41,9 @@ def run(args: argparse.Namespace) -> int:
     from geometry_msgs.msg import Pose2D
     from ppod_msgs.action import MoveParts
     from ppod_msgs.msg import PartPoseArray
-    from rclpy.action import ActionClient
 
     from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.actions import ActionClient
     from ppod_nodes.common.session import RosSession
 
     with RosSession("ppod_move") as ros:

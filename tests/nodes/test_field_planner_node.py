@@ -48,9 +48,9 @@ def test_move_part_brings_a_point_part_to_the_goal_over_tracked_poses(ros):
     from ppod_msgs.action import MovePart
     from ppod_msgs.msg import PartPose, PartPoseArray
     from ppod_msgs.msg import PlateMotion as PlateMotionMsg
-    from rclpy.action import ActionClient
 
     from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.actions import ActionClient
     from ppod_nodes.common.convert import motion_from_msg, seconds_to_stamp
     from ppod_nodes.field_planner import FieldPlannerNode
     from ppod_ros.motion import PlateMotion
@@ -107,11 +107,11 @@ def test_move_part_brings_a_point_part_to_the_goal_over_tracked_poses(ros):
 def test_a_sensorless_move_part_positions_a_part_no_camera_sees(ros):
     from ppod_msgs.action import MovePart
     from ppod_msgs.msg import PlateMotion as PlateMotionMsg
-    from rclpy.action import ActionClient
     from rclpy.parameter import Parameter
     from rosgraph_msgs.msg import Clock
 
     from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.actions import ActionClient
     from ppod_nodes.common.convert import motion_from_msg, seconds_to_stamp
     from ppod_nodes.field_planner import FieldPlannerNode
     from ppod_ros.motion import PlateMotion
@@ -154,9 +154,9 @@ def test_move_parts_brings_two_parts_to_their_own_goals_and_rejects_colliding_go
     from ppod_msgs.action import MoveParts
     from ppod_msgs.msg import PartPose, PartPoseArray, PlannerProgress
     from ppod_msgs.msg import PlateMotion as PlateMotionMsg
-    from rclpy.action import ActionClient
 
     from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.actions import ActionClient
     from ppod_nodes.common.convert import motion_from_msg, seconds_to_stamp
     from ppod_nodes.field_planner import FieldPlannerNode
     from ppod_ros.motion import PlateMotion
@@ -228,10 +228,10 @@ def test_a_late_plan_stops_the_plate_at_the_lease_and_is_dropped(ros, monkeypatc
     from ppod_msgs.action import MoveParts
     from ppod_msgs.msg import PartPose, PartPoseArray
     from ppod_msgs.msg import PlateMotion as PlateMotionMsg
-    from rclpy.action import ActionClient
 
     import ppod_nodes.field_planner as fp
     from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.actions import ActionClient
     from ppod_nodes.common.convert import motion_from_msg, seconds_to_stamp
 
     gate = threading.Event()
@@ -307,10 +307,10 @@ def test_a_planner_error_ends_the_goal_and_stops_the_plate_without_killing_the_n
     from geometry_msgs.msg import Pose2D
     from ppod_msgs.action import MoveParts
     from ppod_msgs.msg import PartPose, PartPoseArray
-    from rclpy.action import ActionClient
 
     import ppod_nodes.field_planner as fp
     from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.actions import ActionClient
     from ppod_nodes.common.convert import seconds_to_stamp
 
     broken = [True]

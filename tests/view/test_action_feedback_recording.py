@@ -12,10 +12,11 @@ pytestmark = pytest.mark.ros
 
 def test_action_feedback_is_recorded_and_decoded_by_rosbags(ros, tmp_path):
     from ppod_msgs.action import MovePart
-    from rclpy.action import ActionClient, ActionServer
+    from rclpy.action import ActionServer
 
     from ppod_nodes.cli.record import default_include
     from ppod_nodes.common import topics
+    from ppod_nodes.common.actions import ActionClient
     from ppod_nodes.record.mcap_io import McapRecorder, read_mcap, read_metadata
 
     def execute(handle):

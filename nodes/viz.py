@@ -22,6 +22,7 @@ from rclpy.node import Node
 from visualization_msgs.msg import MarkerArray
 
 from ppod_nodes.common import qos, topics
+from ppod_nodes.common.events import QuietPublishers
 from ppod_nodes.common.params import Param, declare, read
 from ppod_nodes.common.runner import make_main
 from ppod_nodes.view.ros_drawables import camera_tf, scene_markers
@@ -31,7 +32,7 @@ from ppod_ros.view.scene import DEFAULT_ARROW_SCALE_S, camera_transform
 from ppod_ros.vision import CameraConfig
 
 
-class VizNode(Node):
+class VizNode(QuietPublishers, Node):
     PARAMS = (
         Param("device_config", "", "device description YAML (plate radius); empty: the packaged default"),
         Param("camera_config", "", "camera YAML (the plate -> camera transform); empty: the simulated camera"),

@@ -34,6 +34,7 @@ from std_msgs.msg import String
 
 from ppod_nodes.common import qos, topics
 from ppod_nodes.common.convert import phasors_to_msg, seconds_to_stamp
+from ppod_nodes.common.events import QuietPublishers
 from ppod_nodes.common.params import Param, declare, read
 from ppod_nodes.common.runner import make_main
 from ppod_ros.can.protocol import DeviceState
@@ -53,7 +54,7 @@ def default_scene_path() -> Path:
     return Path(str(resources.files("ppod_sim") / "data" / "scene.yaml"))
 
 
-class SimDeviceNode(Node):
+class SimDeviceNode(QuietPublishers, Node):
     PARAMS = (
         Param("device_config", "", "device description YAML; empty: the packaged default"),
         Param("mismatch", "default", "plant mismatch: the config's ('default') or none ('zero')",

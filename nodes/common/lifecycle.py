@@ -32,6 +32,7 @@ from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import State, TransitionCallbackReturn
 
 from ppod_nodes.common import diagnostics as diag
+from ppod_nodes.common.events import QuietPublishers
 from ppod_nodes.common.params import Param, checked, declare, read, with_runtime
 from ppod_ros.errors import PpodError
 
@@ -41,7 +42,7 @@ COMMON_PARAMS = (
 )
 
 
-class PpodLifecycleNode(LifecycleNode):
+class PpodLifecycleNode(QuietPublishers, LifecycleNode):
     """A lifecycle node with declared parameters, diagnostics and PpodError handling."""
 
     #: Parameters every lifecycle node has (listed by ``NODE --help``).

@@ -22,6 +22,7 @@ from mcap.writer import CompressionType, Writer
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
+from ppod_nodes.common.events import quiet_subscription
 from ppod_nodes.common.msgdict import type_from_name
 from ppod_nodes.record.msgdef import full_definition
 from ppod_ros.errors import ConfigError
@@ -133,7 +134,8 @@ class McapRecorder:
                 self._types[topic] = schema_name
             self.counts[topic] = 0
             self._subs[topic] = self.node.create_subscription(
-                msg_type, topic, lambda data, t=topic: self._write(t, data), qos, raw=True)
+                msg_type, topic, lambda data, t=topic: self._write(t, data), qos, raw=True,
+                event_callbacks=quiet_subscription())
 
     def _write(self, topic: str, data: bytes) -> None:
         now = time.time_ns()

@@ -18,7 +18,9 @@ from __future__ import annotations
 
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 
-CLOCK_TOPIC = "/clock"   # as rclpy's TimeSource names it
+from ppod_nodes.common import topics
+
+CLOCK_TOPIC = topics.CLOCK   # as rclpy's TimeSource names it
 
 
 def quiet_publisher() -> PublisherEventCallbacks:

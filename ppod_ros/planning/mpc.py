@@ -147,7 +147,11 @@ class MpcSettings:
                                           # read 0.86-1.08 mm at rest for 2.5 s, never held for settle_s, and the
                                           # plate restarted four times: benchmark seed 1 scene 8). None: off
     hold_at_rest: bool = True             # the plate at rest and every part within tolerance: no new motion
-                                          # while they settle (settle_s), the plate at rest holds them
+                                          # while they settle (settle_s), the plate at rest holds them ...
+    rest_hold_within: float = 0.9         # ... within this fraction of its tolerances, a margin for the
+                                          # tracker's error (at 1.0 a demo run ended with a washer held at 1.99
+                                          # mm by the tracker, 2.03 mm by ground truth, tolerance 2 mm; the
+                                          # benchmark's scenes: one bracket and three parts alike either way)
     stop_ahead: bool = True               # judge the stop where the ramp down leaves the parts, not where they
                                           # are (a bracket stopped 0.4 mm from its goal was carried 2.1 mm and
                                           # 2.7 deg past it by the ramp down, and took 6 s more to come back)
@@ -326,6 +330,9 @@ class MpcSettings:
         v = self.hold_within
         if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= 1):
             raise ConfigError(f"hold_within: expected a fraction 0..1 of the tolerances or None, got {v!r}")
+        v = self.rest_hold_within
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1):
+            raise ConfigError(f"rest_hold_within: expected a fraction 0..1 of the tolerances, got {v!r}")
         v = self.rest_average_after_s
         if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ConfigError(f"rest_average_after_s: must be >= 0 s or None (off), got {v!r}")
@@ -1081,7 +1088,11 @@ class MultiTask:
         if self._all_well_within(statuses, poses, t_s):
             return self._stop(t_s, poses, statuses)
         self.phase = "moving"
-        if s.hold_at_rest and self.current.is_zero() and all(st.within for st in statuses):
+        f = s.rest_hold_within
+        if s.hold_at_rest and self.current.is_zero() and all(
+                st.position_error_m <= f * g.position_tol_m
+                and (st.angle_error_rad is None or abs(st.angle_error_rad) <= f * g.angle_tol_rad)
+                for g, st in zip(self.goals, statuses)):
             # Every part within tolerance with the plate at rest, which holds them: wait out settle_s
             # (the bracket of benchmark seed 1 scene 8 was 0.1 s short of it when a weak motion
             # restarted the plate, carried it out by 0.3 mm at the next stop, and again four times).

@@ -20,8 +20,8 @@ from ppod_ros.parts import PointPart
 from ppod_ros.planning.mpc import MpcSettings, MultiTask, PartGoal
 
 GOAL = (0.01, -0.005)
-TRUE_ERROR_M = 0.95e-3   # tolerance 1 mm
-NOISE_M = 0.1e-3         # the tracker's reading alternates this far out and in
+TRUE_ERROR_M = 0.85e-3   # tolerance 1 mm (the plate is held at rest within 0.9 of it)
+NOISE_M = 0.2e-3         # the tracker's reading alternates this far out and in
 
 
 def _noisy_at_rest(task: MultiTask, seconds: float, fps: float = 10.0):
@@ -49,7 +49,7 @@ def test_a_part_at_rest_within_tolerance_is_averaged_and_reached_without_a_motio
     assert task.switches == 0
     # Every other frame reads 1.05 mm: only the average keeps the part within its 1 mm.
     assert task.finished.parts[0].reached
-    assert task.finished.parts[0].position_error_m == pytest.approx(TRUE_ERROR_M, abs=0.03e-3)
+    assert task.finished.parts[0].position_error_m == pytest.approx(TRUE_ERROR_M, abs=0.05e-3)
 
 
 def test_without_the_average_the_noise_keeps_the_part_from_settling():
@@ -82,6 +82,20 @@ def test_angles_are_averaged_on_the_part_symmetry_circle():
     assert out[0, 2] == pytest.approx(-math.pi / 4, abs=1e-9)
 
 
-def test_rest_average_setting_validated():
+def test_a_part_held_only_with_a_margin_for_the_tracker():
+    """At 0.95 of its tolerance a part is not held: the planner may move it nearer (a tracker 0.04 mm
+    off put a demo's washer at 2.03 mm by ground truth, held at 1.99 mm, tolerance 2 mm)."""
+    pose = np.array([[GOAL[0] + 0.95e-3, GOAL[1], 0.0]])
+    task = _task()
+    task.step(0.0, pose)
+    assert task.switches == 1 and not task.current.is_zero()
+    held = _task(rest_hold_within=1.0)
+    held.step(0.0, pose)
+    assert held.switches == 0
+
+
+def test_rest_settings_validated():
     with pytest.raises(ConfigError, match="rest_average_after_s"):
         MpcSettings(rest_average_after_s=-0.1)
+    with pytest.raises(ConfigError, match="rest_hold_within"):
+        MpcSettings(rest_hold_within=0.0)

@@ -1093,9 +1093,10 @@ class MultiTask:
                 st.position_error_m <= f * g.position_tol_m
                 and (st.angle_error_rad is None or abs(st.angle_error_rad) <= f * g.angle_tol_rad)
                 for g, st in zip(self.goals, statuses)):
-            # Every part within tolerance with the plate at rest, which holds them: wait out settle_s
-            # (the bracket of benchmark seed 1 scene 8 was 0.1 s short of it when a weak motion
-            # restarted the plate, carried it out by 0.3 mm at the next stop, and again four times).
+            # Every part within rest_hold_within of its tolerances with the plate at rest, which holds
+            # them: wait out settle_s instead of restarting the plate (on benchmark seed 1 scene 8 a
+            # weak motion restarted it 0.1 s short of that, and the next stop's ramp down carried the
+            # bracket out again).
             self._v_current = np.zeros((len(self.goals), 3))
             return self._switch(t_s, poses, self.current, self._v_current, keep=True)
         self._update_focus(t_s, statuses)

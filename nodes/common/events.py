@@ -20,8 +20,6 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 
 from ppod_nodes.common import topics
 
-CLOCK_TOPIC = topics.CLOCK   # as rclpy's TimeSource names it
-
 
 def quiet_publisher() -> PublisherEventCallbacks:
     """Event callbacks for a publisher with no handler at all (none given, no default)."""
@@ -39,7 +37,7 @@ class QuietPublishers:
     ``use_sim_time`` makes, unless callbacks are given."""
 
     def create_subscription(self, msg_type, topic, *args, event_callbacks=None, **kwargs):
-        if event_callbacks is None and topic == CLOCK_TOPIC:
+        if event_callbacks is None and topic == topics.CLOCK:   # as rclpy's TimeSource names it
             event_callbacks = quiet_subscription()
         return super().create_subscription(msg_type, topic, *args, event_callbacks=event_callbacks, **kwargs)
 

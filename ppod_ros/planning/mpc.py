@@ -352,6 +352,12 @@ class PartGoal:
     position_tol_m: float = 1e-3
     angle_tol_rad: float = math.radians(2.0)
 
+    def within(self, position_m: float, angle_rad: float | None, fraction: float = 1.0) -> bool:
+        """Whether a part ``position_m`` from this goal and ``angle_rad`` off its angle (None: position
+        only) is within ``fraction`` of the tolerances (NaN: not within)."""
+        return position_m <= fraction * self.position_tol_m and (
+            angle_rad is None or abs(angle_rad) <= fraction * self.angle_tol_rad)
+
 
 @dataclass(frozen=True)
 class PartStatus:
@@ -897,8 +903,7 @@ class MultiTask:
             st.last_seen = t_s
             dist = math.hypot(p[0] - g.x_m, p[1] - g.y_m)
             ang = None if g.theta_rad is None else float(_wrap(p[2] - g.theta_rad, self.symmetry[g.index]))
-            f = self.settings.within_fraction
-            within = dist <= f * g.position_tol_m and (ang is None or abs(ang) <= f * g.angle_tol_rad)
+            within = g.within(dist, ang, self.settings.within_fraction)
             if within:
                 if st.in_tol_since is None:
                     st.in_tol_since = t_s
@@ -1030,15 +1035,11 @@ class MultiTask:
         motion playing, judged where the ramp down would leave it: the pose plus the predicted velocity
         now (the segment's, ramp included, times the part's scale) over half the ramp."""
         s = self.settings
-        f = s.stop_within
-
-        def well(g: PartGoal, position_m: float, angle_rad: float | None) -> bool:
-            return position_m <= f * g.position_tol_m and (angle_rad is None or abs(angle_rad) <= f * g.angle_tol_rad)
-
         seg = self.segment
         if not (s.stop_ahead and poses is not None and seg is not None and seg.motion_key == self.current.key
                 and not self.current.is_zero()):
-            return all(well(g, st.position_error_m, st.angle_error_rad) for g, st in zip(self.goals, statuses))
+            return all(g.within(st.position_error_m, st.angle_error_rad, s.stop_within)
+                       for g, st in zip(self.goals, statuses))
         a = min(1.0, max(0.0, (t_s - seg.t_s) / s.ramp_s)) if s.ramp_s > 0 else 1.0
         v_now = seg.previous + a * (seg.velocity - seg.previous)
         scales = self._axis_scales()
@@ -1050,7 +1051,7 @@ class MultiTask:
             angle = None if g.theta_rad is None else float(_wrap(stop[2] - g.theta_rad, self.symmetry[g.index]))
             if angle is not None and not math.isfinite(angle):
                 angle = None   # an unseen angle: judged by its position
-            if not well(g, math.hypot(stop[0] - g.x_m, stop[1] - g.y_m), angle):
+            if not g.within(math.hypot(stop[0] - g.x_m, stop[1] - g.y_m), angle, s.stop_within):
                 return False
         return True
 
@@ -1088,10 +1089,8 @@ class MultiTask:
         if self._all_well_within(statuses, poses, t_s):
             return self._stop(t_s, poses, statuses)
         self.phase = "moving"
-        f = s.rest_hold_within
         if s.hold_at_rest and self.current.is_zero() and all(
-                st.position_error_m <= f * g.position_tol_m
-                and (st.angle_error_rad is None or abs(st.angle_error_rad) <= f * g.angle_tol_rad)
+                g.within(st.position_error_m, st.angle_error_rad, s.rest_hold_within)
                 for g, st in zip(self.goals, statuses)):
             # Every part within rest_hold_within of its tolerances with the plate at rest, which holds
             # them: wait out settle_s instead of restarting the plate (on benchmark seed 1 scene 8 a

@@ -168,6 +168,7 @@ class _RunningTask:
         self.stopped_at: float | None = None       # the lease stopped the plate at this device time
         self.stopped_poses: np.ndarray | None = None
         self.lease_stops = 0
+        self.step_called_at: float | None = None   # device time the step being planned was submitted
 
 
 class FieldPlannerNode(PpodLifecycleNode):
@@ -461,6 +462,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         if self._pending is not None:
             self._check_lease(run, t_s, poses)
             return
+        run.step_called_at = self._now()
         self._pending = (run, t_s, self._worker.submit(self._timed_step, run, t_s, poses))
         self._pending[2].add_done_callback(self._signal_step_done)
 
@@ -549,6 +551,11 @@ class FieldPlannerNode(PpodLifecycleNode):
         if publish_motion and step.motion is not None and step.motion.key != run.last_motion_key:
             run.last_motion_key = step.motion.key
             self.goal_pub.publish(motion_to_msg(step.motion, self.get_clock().now().to_msg()))
+            report = getattr(run.task, "command_latency", None)
+            if report is not None and run.step_called_at is not None:
+                # The planning time and the executor's, in device time: the planner lowers its
+                # approach gain for it (MpcSettings.latency_ref_s).
+                report(self._now() - run.step_called_at)
         if run.multi:
             fb = MoveParts.Feedback(phase=step.phase, text=step.text, plan_ms=float(step.plan_ms))
             for st in step.parts:
@@ -565,8 +572,11 @@ class FieldPlannerNode(PpodLifecycleNode):
                 fb.current_pose = pose.pose
         run.handle.publish_feedback(fb)
         self.progress_pub.publish(_progress(fb, run.multi, self.get_clock().now().to_msg()))
+        extra = {}
+        if hasattr(run.task, "latency_s"):   # the running mean of the reported command latency
+            extra["command_latency_s"] = run.task.latency_s
         self.diagnostics.set("task", diag.OK, step.text, phase=step.phase, position_error_m=step.position_error_m,
-                             step_ms=step_ms, lease_stops=run.lease_stops)
+                             step_ms=step_ms, lease_stops=run.lease_stops, **extra)
         if step.done or step.failed_reason:
             self._finish(step.done and not step.failed_reason, step.failed_reason or step.text)
 

@@ -65,7 +65,20 @@ class MpcSettings:
     replan_period_s: float = 0.5          # device time between replanning steps (>= 2 Hz)
     horizon_s: float = 1.0                # prediction horizon
     ramp_s: float = 0.5                   # the generator's ramp on a switch (device default_ramp_s)
-    approach_per_s: float = 0.8           # waypoint: this fraction of the error per horizon second
+    approach_per_s: float = 0.8           # waypoint: this fraction of the error per horizon second (with no
+                                          # command latency; see latency_ref_s)
+    latency_ref_s: float | None = 0.5     # the approach gain falls with the command latency L (frame to the
+                                          # motion playing, :meth:`MultiTask.command_latency`) as
+                                          # approach_per_s / (1 + L / latency_ref_s): a motion chosen on poses
+                                          # L old keeps a part moving L longer, and at the full gain the
+                                          # endgame oscillates (the demo's scene in the loop, 0.5 s, 20 plant
+                                          # seeds: 10/20 reached in 90 s, 19/20 lowered; docs/planner.md).
+                                          # None: off
+    latency_smoothing: float = 0.3        # weight of each reported latency in its running mean
+    latency_from_parts: int = 2           # ... the gain lowered only when at least this many parts are
+                                          # commanded: one bracket under 0.3 s of latency came out 38/40 with
+                                          # it lowered against 40/40 (a slower last turn let it stick), three
+                                          # parts 36/40 against 33/40 (benchmark seeds 0 and 1; docs/planner.md)
     frequency_hz: float = DEFAULT_FREQUENCY_HZ  # of the searched motions
     harmonics: int = 1                    # 1: 12 real inputs; 2: 24 (the Gauss-Newton search's)
     two_harmonics_from_parts: int = 2     # ... and 2 whenever at least this many parts are commanded (0: never):
@@ -303,6 +316,14 @@ class MpcSettings:
             raise ConfigError(f"scale_by_name: expected 'off', 'rigid' or 'all', got {self.scale_by_name!r}")
         if self.ramp_midpoint not in ("off", "estimate", "plan"):
             raise ConfigError(f"ramp_midpoint: expected 'off', 'estimate' or 'plan', got {self.ramp_midpoint!r}")
+        if self.latency_ref_s is not None and not (isinstance(self.latency_ref_s, (int, float))
+                                                   and math.isfinite(self.latency_ref_s) and self.latency_ref_s > 0):
+            raise ConfigError(f"latency_ref_s: must be > 0 s (None: off), got {self.latency_ref_s!r}")
+        if not (isinstance(self.latency_from_parts, int) and self.latency_from_parts >= 1):
+            raise ConfigError(f"latency_from_parts: expected an integer >= 1, got {self.latency_from_parts!r}")
+        v = self.latency_smoothing
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1):
+            raise ConfigError(f"latency_smoothing: expected a weight 0..1, got {v!r}")
         if self.line_search not in ("best", "first"):
             raise ConfigError(f"line_search: expected 'best' or 'first', got {self.line_search!r}")
         if self.harmonics not in (1, 2):
@@ -760,6 +781,7 @@ class MultiTask:
         self.plan_searched: list[bool] = []   # per replanning step (as plan_times_ms): the candidates were
                                               # searched (not a step within the dwell that kept the motion)
         self._searched = False
+        self.latency_s = 0.0   # running mean of the reported command latencies (command_latency)
         self.last_pose: dict[int, np.ndarray] = {}
         self.progress: list[tuple[float, float]] = []
         self.focus: int | None = None
@@ -1054,6 +1076,27 @@ class MultiTask:
             if not g.within(math.hypot(stop[0] - g.x_m, stop[1] - g.y_m), angle, s.stop_within):
                 return False
         return True
+
+    def command_latency(self, latency_s: float) -> None:
+        """The motion the last step returned started playing ``latency_s`` (device time) after that
+        step was called: the planning time and the transport (the field planner node reports it when
+        it publishes a motion; the ROS-free loop under ``command_latency_s``). Only a step that
+        searched counts (a stop or a kept motion takes a few ms); the running mean lowers the approach
+        gain (:meth:`approach_per_s`). A latency that is not finite or negative is ignored."""
+        if not (self._searched and math.isfinite(latency_s) and latency_s >= 0.0):
+            return
+        w = self.settings.latency_smoothing
+        self.latency_s += w * (float(latency_s) - self.latency_s)
+
+    def approach_per_s(self) -> float:
+        """The waypoints' approach gain (1/s): ``approach_per_s`` over ``1 + L / latency_ref_s`` for the
+        running mean L of the command latency, with at least ``latency_from_parts`` parts commanded (a
+        discrete loop with a delay: the gain that settles parts with no delay makes them overshoot
+        and oscillate with one)."""
+        s = self.settings
+        if s.latency_ref_s is None or len(self.goals) < s.latency_from_parts:
+            return s.approach_per_s
+        return s.approach_per_s / (1.0 + self.latency_s / s.latency_ref_s)
 
     def plate_stopped(self, t_s: float, poses) -> None:
         """The plate was stopped from outside at ``t_s`` (the field planner node does so when a plan
@@ -1481,15 +1524,16 @@ class MultiTask:
         s, H = self.settings, self.settings.horizon_s
         way = np.zeros((len(self.goals), 3))
         weight = np.ones(len(self.goals))
+        approach = self.approach_per_s()
         for k, (g, st) in enumerate(zip(self.goals, statuses)):
             p = poses[g.index]
             e = np.array([g.x_m - p[0], g.y_m - p[1]])
             d = float(np.hypot(*e))
-            step = min(1.0, s.approach_per_s * H, s.max_speed_mps * H / d) if d > 0 else 0.0
+            step = min(1.0, approach * H, s.max_speed_mps * H / d) if d > 0 else 0.0
             way[k, :2] = p[:2] + step * e
             if g.theta_rad is not None:
                 a = -float(_wrap(p[2] - g.theta_rad, self.symmetry[g.index]))
-                lim = min(s.max_turn_radps * H, s.approach_per_s * H * abs(a))
+                lim = min(s.max_turn_radps * H, approach * H * abs(a))
                 turn = float(np.clip(a, -lim, lim))
                 way[k, 2] = p[2] + turn
                 c = self._pivot(g, p)

@@ -254,6 +254,9 @@ def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | Rig
             if step.motion is not None:
                 if command_lag and _searched(task, step):
                     pending = (t + command_lag * dt_s, step.motion)
+                    report = getattr(task, "command_latency", None)
+                    if report is not None:   # as the field planner node reports it on publishing
+                        report(command_lag * dt_s)
                 else:
                     new = step.motion
         if new is not None:

@@ -355,3 +355,74 @@ def test_a_planner_error_ends_the_goal_and_stops_the_plate_without_killing_the_n
     handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
     assert handle.accepted
     ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
+
+
+def test_the_node_reports_each_published_plan_s_latency_in_device_time(ros, monkeypatch):
+    """The planner lowers its approach gain for its command latency (MpcSettings.latency_ref_s): the
+    node reports, with each motion it publishes, the device time from the frame's step to the
+    publication. Here the first plan "takes" while /clock advances 0.4 s."""
+    import threading
+
+    from geometry_msgs.msg import Pose2D
+    from ppod_msgs.action import MoveParts
+    from ppod_msgs.msg import PartPose, PartPoseArray
+    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+    from rclpy.parameter import Parameter
+    from rosgraph_msgs.msg import Clock
+
+    import ppod_nodes.field_planner as fp
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.actions import ActionClient
+    from ppod_nodes.common.convert import seconds_to_stamp
+
+    gate, planning = threading.Event(), threading.Event()
+    reported = []
+
+    class SlowFirstPlan(fp.MultiTask):
+        def _plan(self, t_s, poses, statuses):
+            planning.set()
+            gate.wait(60)   # the first replanning "takes" until the test releases it
+            return super()._plan(t_s, poses, statuses)
+
+        def command_latency(self, latency_s):
+            reported.append(latency_s)
+            super().command_latency(latency_s)
+
+    monkeypatch.setattr(fp, "MultiTask", SlowFirstPlan)
+    node = _active(ros, ros.make(fp.FieldPlannerNode, parameter_overrides=[Parameter("use_sim_time", value=True)]))
+    clock_pub = ros.node.create_publisher(Clock, "/clock", 10)
+    goals = ros.collect(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+    poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
+
+    def clock(t: float) -> None:
+        clock_pub.publish(Clock(clock=seconds_to_stamp(t)))
+        assert ros.wait_until(lambda: abs(node._now() - t) < 1e-9, 10.0), "the node's clock did not follow /clock"
+
+    def frame(t: float) -> None:
+        msg = PartPoseArray()
+        msg.header.stamp = seconds_to_stamp(t)
+        for pid, (x, y) in ((7, (-0.04, 0.035)), (9, (0.045, 0.02))):
+            p = PartPose(id=pid, label="washer", status=PartPose.STATUS_TRACKED)
+            p.pose.x, p.pose.y = x, y
+            p.stamp = msg.header.stamp
+            msg.parts.append(p)
+        poses_pub.publish(msg)
+
+    clock(1.0)
+    frame(1.0)
+    ros.wait_until(lambda: False, 0.2)
+    client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
+    assert client.wait_for_server(timeout_sec=10)
+    goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
+                          timeout_s=50.0)
+    handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
+    assert handle.accepted
+    if not ros.wait_until(planning.is_set, 1.0):   # planned at once on the poses it has, or on the next frame
+        frame(1.0)
+    assert ros.wait_until(planning.is_set, 10.0), "the node did not plan"
+    clock(1.4)          # device time passes while the plan is computed (submitted at 1.0)
+    gate.set()
+    assert ros.wait_until(lambda: len(goals) == 1, 30.0), "the plan published no motion"
+    assert ros.wait_until(lambda: len(reported) == 1, 10.0), "the published plan's latency was not reported"
+    assert reported[0] == pytest.approx(0.4, abs=1e-6)
+    ros.wait_future(handle.cancel_goal_async(), 10, "cancel")

@@ -21,6 +21,23 @@ def _active(ros, node):
     return node
 
 
+def _two_washers(t: float):
+    """A PartPoseArray at device time ``t``: washers 7 and 9 tracked where the lease and latency
+    tests keep them (those tests step the planner, not the parts)."""
+    from ppod_msgs.msg import PartPose, PartPoseArray
+
+    from ppod_nodes.common.convert import seconds_to_stamp
+
+    msg = PartPoseArray()
+    msg.header.stamp = seconds_to_stamp(t)
+    for pid, (x, y) in ((7, (-0.04, 0.035)), (9, (0.045, 0.02))):
+        p = PartPose(id=pid, label="washer", status=PartPose.STATUS_TRACKED)
+        p.pose.x, p.pose.y = x, y
+        p.stamp = msg.header.stamp
+        msg.parts.append(p)
+    return msg
+
+
 def test_plan_field_designs_a_sink_and_rejects_bad_requests_naming_the_problem(ros):
     from ppod_msgs.srv import PlanField
 
@@ -226,13 +243,13 @@ def test_a_late_plan_stops_the_plate_at_the_lease_and_is_dropped(ros, monkeypatc
 
     from geometry_msgs.msg import Pose2D
     from ppod_msgs.action import MoveParts
-    from ppod_msgs.msg import PartPose, PartPoseArray
+    from ppod_msgs.msg import PartPoseArray
     from ppod_msgs.msg import PlateMotion as PlateMotionMsg
 
     import ppod_nodes.field_planner as fp
     from ppod_nodes.common import qos, topics
     from ppod_nodes.common.actions import ActionClient
-    from ppod_nodes.common.convert import motion_from_msg, seconds_to_stamp
+    from ppod_nodes.common.convert import motion_from_msg
 
     gate = threading.Event()
     plans = []
@@ -250,14 +267,7 @@ def test_a_late_plan_stops_the_plate_at_the_lease_and_is_dropped(ros, monkeypatc
     poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
 
     def frame(t: float) -> None:
-        msg = PartPoseArray()
-        msg.header.stamp = seconds_to_stamp(t)
-        for pid, (x, y) in ((7, (-0.04, 0.035)), (9, (0.045, 0.02))):
-            p = PartPose(id=pid, label="washer", status=PartPose.STATUS_TRACKED)
-            p.pose.x, p.pose.y = x, y
-            p.stamp = msg.header.stamp
-            msg.parts.append(p)
-        poses_pub.publish(msg)
+        poses_pub.publish(_two_washers(t))
         ros.wait_until(lambda: False, 0.1)
 
     frame(0.0)
@@ -365,7 +375,7 @@ def test_the_node_reports_each_published_plan_s_latency_in_device_time(ros, monk
 
     from geometry_msgs.msg import Pose2D
     from ppod_msgs.action import MoveParts
-    from ppod_msgs.msg import PartPose, PartPoseArray
+    from ppod_msgs.msg import PartPoseArray
     from ppod_msgs.msg import PlateMotion as PlateMotionMsg
     from rclpy.parameter import Parameter
     from rosgraph_msgs.msg import Clock
@@ -395,22 +405,23 @@ def test_the_node_reports_each_published_plan_s_latency_in_device_time(ros, monk
     poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
 
     def clock(t: float) -> None:
-        clock_pub.publish(Clock(clock=seconds_to_stamp(t)))
-        assert ros.wait_until(lambda: abs(node._now() - t) < 1e-9, 10.0), "the node's clock did not follow /clock"
+        # Published until the node's clock shows it (the first message can precede discovery).
+        def shown() -> bool:
+            clock_pub.publish(Clock(clock=seconds_to_stamp(t)))
+            return ros.wait_until(lambda: abs(node._now() - t) < 1e-9, 0.2)
+
+        assert ros.wait_until(shown, 10.0), "the node's clock did not follow /clock"
 
     def frame(t: float) -> None:
-        msg = PartPoseArray()
-        msg.header.stamp = seconds_to_stamp(t)
-        for pid, (x, y) in ((7, (-0.04, 0.035)), (9, (0.045, 0.02))):
-            p = PartPose(id=pid, label="washer", status=PartPose.STATUS_TRACKED)
-            p.pose.x, p.pose.y = x, y
-            p.stamp = msg.header.stamp
-            msg.parts.append(p)
-        poses_pub.publish(msg)
+        poses_pub.publish(_two_washers(t))
 
     clock(1.0)
-    frame(1.0)
-    ros.wait_until(lambda: False, 0.2)
+
+    def seen() -> bool:   # published until the node has poses (the first can precede discovery)
+        frame(1.0)
+        return ros.wait_until(lambda: node._poses is not None, 0.2)
+
+    assert ros.wait_until(seen, 10.0), "the node never received poses"
     client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
     assert client.wait_for_server(timeout_sec=10)
     goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],

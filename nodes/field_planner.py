@@ -551,11 +551,10 @@ class FieldPlannerNode(PpodLifecycleNode):
         if publish_motion and step.motion is not None and step.motion.key != run.last_motion_key:
             run.last_motion_key = step.motion.key
             self.goal_pub.publish(motion_to_msg(step.motion, self.get_clock().now().to_msg()))
-            report = getattr(run.task, "command_latency", None)
-            if report is not None and run.step_called_at is not None:
+            if isinstance(run.task, MultiTask) and run.step_called_at is not None:
                 # The planning time and the executor's, in device time: the planner lowers its
                 # approach gain for it (MpcSettings.latency_ref_s).
-                report(self._now() - run.step_called_at)
+                run.task.command_latency(self._now() - run.step_called_at)
         if run.multi:
             fb = MoveParts.Feedback(phase=step.phase, text=step.text, plan_ms=float(step.plan_ms))
             for st in step.parts:
@@ -572,9 +571,8 @@ class FieldPlannerNode(PpodLifecycleNode):
                 fb.current_pose = pose.pose
         run.handle.publish_feedback(fb)
         self.progress_pub.publish(_progress(fb, run.multi, self.get_clock().now().to_msg()))
-        extra = {}
-        if hasattr(run.task, "latency_s"):   # the running mean of the reported command latency
-            extra["command_latency_s"] = run.task.latency_s
+        # The running mean of the reported command latency (a MultiTask's).
+        extra = {"command_latency_s": run.task.latency_s} if isinstance(run.task, MultiTask) else {}
         self.diagnostics.set("task", diag.OK, step.text, phase=step.phase, position_error_m=step.position_error_m,
                              step_ms=step_ms, lease_stops=run.lease_stops, **extra)
         if step.done or step.failed_reason:

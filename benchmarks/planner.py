@@ -16,9 +16,10 @@ Everything runs in this process on the full models (no ROS, no camera). Sections
                bracket only: it moves one chosen part) in the same run, closed as the stack
                closes it: poses at 10 Hz with tracker noise (0.05 mm, 0.1 deg) and 0.1 s latency,
                the generator's 0.5 s ramp on every switch, random actuator errors per scene (gain
-               +-15 %, phase +-10 deg, coupling +-5 %, as the simulated device's drive) played
-               as the stack plays them (ActuatorPlantError: the feedback starts a new motion from
-               its learned plant after the first, corrects the rest from 1 s with a 1 s time
+               +-15 %, phase +-10 deg, coupling +-5 %, and the drive's 3 % third harmonic, as
+               the simulated device's drive) played as the stack plays them (ActuatorPlantError:
+               the feedback starts a new motion from its learned plant after the first, which
+               does not predict the third harmonic, corrects the rest from 1 s with a 1 s time
                constant, and the generator's checker scales corrections back as it does on the
                bus), random friction per part in 0.2-0.45
                (the planner's models say 0.3), the simulator's part separation. Random scenes per

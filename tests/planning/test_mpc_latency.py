@@ -143,7 +143,7 @@ def test_the_demo_scene_with_half_a_second_of_latency_settles_only_at_the_lowere
     assert run.step is not None and not run.step.done
     task, run = _demo_scene_run(MpcSettings(), 30.0)
     assert run.step is not None and run.step.done and not run.step.failed_reason, run.step.text
-    assert task.latency_s == pytest.approx(0.5, abs=0.01)
+    assert 0.45 < task.latency_s <= 0.5   # the running mean (from 0, smoothing 0.3) of the 0.5 s reported
     for g in task.goals:   # by ground truth
         assert math.hypot(run.configurations[g.index, 0] - g.x_m, run.configurations[g.index, 1] - g.y_m) \
             <= g.position_tol_m

@@ -35,6 +35,10 @@ computed, every frame checks how old those poses are; past ``plan_lease_s`` (dev
 pose stamps) the plate is stopped (a zero motion: at rest it holds every part), the late plan is
 dropped when it comes, and the task replans from rest. A busy or stalled host then costs time,
 never a part carried off by a stale motion.
+A step that does not come back: a frame that finds the step finished but not yet applied applies it
+(a lost wake-up costs a frame, not the goal); past ``plan_stuck_s`` of device time the goal ends as
+failed with the reason, the plate is stopped, the planning thread's stack is logged and the thread
+is abandoned (a new one plans the next goal), so the node and its action server live on.
 Diagnostics: the last design (kind, R^2, seconds) and the running task (phase, errors).
 """
 
@@ -42,7 +46,10 @@ from __future__ import annotations
 
 import contextlib
 import math
+import sys
+import threading
 import time
+import traceback
 from concurrent.futures import ThreadPoolExecutor
 from importlib import resources
 from pathlib import Path
@@ -174,7 +181,7 @@ class _RunningTask:
 class FieldPlannerNode(PpodLifecycleNode):
     # Read per request from self.params, so a change applies to the next request (nodes/common/lifecycle.py).
     RUNTIME_PARAMS = ("frequency_hz", "num_frequencies", "position_tolerance_m", "orientation_tolerance_deg",
-                      "timeout_s", "stop_when_done", "plan_lease_s")
+                      "timeout_s", "stop_when_done", "plan_lease_s", "plan_stuck_s")
     PARAMS = (
         Param("device_config", "", "device description YAML; empty: the packaged default (docs/device.md)"),
         Param("tracker_config", "", "tracker file naming the part types (label -> part model); "
@@ -189,6 +196,9 @@ class FieldPlannerNode(PpodLifecycleNode):
         Param("plan_lease_s", 1.0, "device time a MoveParts motion may play past the poses it was planned on "
                                    "while the next plan is computed; then the plate stops until it comes",
               min_value=0.1, max_value=10.0),
+        Param("plan_stuck_s", 10.0, "device time a planning step may take before its goal ends as failed "
+                                    "(the plate stopped, the planning thread abandoned)", min_value=1.0,
+              max_value=600.0),
     )
 
     def __init__(self, **kwargs):
@@ -199,6 +209,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         self._poses: PartPoseArray | None = None
         # Closed-loop steps run on one planning thread; the executor applies their results.
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
+        self._abandoned = 0   # planning threads given up on (plan_stuck_s)
         self._pending: tuple[_RunningTask, float, Any] | None = None
         self._step_done = self.create_guard_condition(self._on_step_done)
         self.goal_pub = self.create_lifecycle_publisher(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
@@ -460,7 +471,11 @@ class FieldPlannerNode(PpodLifecycleNode):
             self._apply(run, t_s, self._timed_step(run, t_s, poses))
             return
         if self._pending is not None:
+            if self._pending[2].done():   # finished, its wake-up not applied yet (or lost): apply it now
+                self._on_step_done()
+                return
             self._check_lease(run, t_s, poses)
+            self._check_stuck(run, t_s)
             return
         run.step_called_at = self._now()
         self._pending = (run, t_s, self._worker.submit(self._timed_step, run, t_s, poses))
@@ -541,6 +556,25 @@ class FieldPlannerNode(PpodLifecycleNode):
             f"replanning is late: the motion playing was planned on poses {age:.2f} s old (plan_lease_s "
             f"{lease:g} s): plate stopped until the next plan ({run.lease_stops} such stops in this goal)")
 
+    def _check_stuck(self, run: _RunningTask, t_s: float) -> None:
+        """A planning step pending for more than ``plan_stuck_s`` of device time (from the frame it
+        was planned on) will not be waited for: the goal ends as failed and the plate stops; the
+        planning thread's stack goes to the log and the thread is abandoned (Python cannot stop it),
+        so the next goal plans on a new one."""
+        pending_run, planned_t, future = self._pending
+        limit = float(self.params.get("plan_stuck_s", 10.0))
+        age = t_s - planned_t
+        if pending_run is not run or age <= limit or future.done():
+            return
+        self._pending = None
+        stuck, self._worker = self._worker, ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
+        stuck.shutdown(wait=False, cancel_futures=True)
+        self._abandoned += 1
+        self.get_logger().error(f"planning step has not returned after {age:.1f} s of device time "
+                                f"(plan_stuck_s {limit:g} s); abandoned, where it is: {_stacks_of(stuck)}")
+        self._finish(False, f"planning step did not return within plan_stuck_s {limit:g} s of device time "
+                            "(abandoned; see the node's log); plate stopped")
+
     def _apply(self, run: _RunningTask, t_s: float, outcome, publish_motion: bool = True) -> None:
         """Publish a finished step: its motion (when new), the action feedback and the progress."""
         step, step_ms = outcome
@@ -594,6 +628,19 @@ class FieldPlannerNode(PpodLifecycleNode):
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
+
+
+def _stacks_of(pool: ThreadPoolExecutor) -> str:
+    """The innermost frames of ``pool``'s threads, on one line (for the log)."""
+    frames = sys._current_frames()
+    out = []
+    for thread in list(getattr(pool, "_threads", ())):
+        frame = frames.get(thread.ident) if isinstance(thread, threading.Thread) else None
+        if frame is not None:
+            calls = traceback.extract_stack(frame)[-6:]
+            out.append(f"{thread.name}: " + " <- ".join(f"{Path(c.filename).name}:{c.lineno} {c.name}"
+                                                        for c in reversed(calls)))
+    return "; ".join(out) or "no live planning thread"
 
 
 main = make_main(FieldPlannerNode)

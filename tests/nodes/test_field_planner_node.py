@@ -437,3 +437,119 @@ def test_the_node_reports_each_published_plan_s_latency_in_device_time(ros, monk
     assert ros.wait_until(lambda: len(reported) == 1, 10.0), "the published plan's latency was not reported"
     assert reported[0] == pytest.approx(0.4, abs=1e-6)
     ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
+
+
+def test_a_planning_step_that_never_returns_ends_the_goal_and_the_node_plans_the_next(ros, monkeypatch):
+    """Regression (a demo run on the simulated device): the planning thread did not come back from a
+    step, the lease stopped the plate, and the MoveParts goal hung for 5 minutes until the demo's
+    wall-clock guard cancelled it. Past ``plan_stuck_s`` of device time the goal ends as failed with
+    the reason, the thread is abandoned, and the next goal plans on a new one."""
+    import threading
+
+    from geometry_msgs.msg import Pose2D
+    from ppod_msgs.action import MoveParts
+    from ppod_msgs.msg import PartPoseArray
+    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+    from rclpy.parameter import Parameter
+
+    import ppod_nodes.field_planner as fp
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.actions import ActionClient
+    from ppod_nodes.common.convert import motion_from_msg
+
+    gate = threading.Event()
+    hang = [True]
+    plans = []
+
+    class HangsOnce(fp.MultiTask):
+        def _plan(self, t_s, poses, statuses):
+            plans.append(t_s)
+            if len(plans) == 2 and hang[0]:
+                hang[0] = False
+                gate.wait(120)  # the second replanning never comes back while the test runs
+            return super()._plan(t_s, poses, statuses)
+
+    monkeypatch.setattr(fp, "MultiTask", HangsOnce)
+    node = _active(ros, ros.make(fp.FieldPlannerNode, parameter_overrides=[Parameter("plan_stuck_s", value=2.0)]))
+    goals = ros.collect(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+    poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
+    t = [0.0]
+
+    def frame() -> None:
+        poses_pub.publish(_two_washers(t[0]))
+        t[0] = round(t[0] + 0.1, 1)
+        ros.wait_until(lambda: False, 0.1)
+
+    try:
+        frame()
+        client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
+        assert client.wait_for_server(timeout_sec=10)
+        goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
+                              timeout_s=50.0)
+        handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
+        assert handle.accepted
+        result = handle.get_result_async()
+        while len(plans) < 2 and t[0] < 5.0:
+            frame()
+        assert len(plans) == 2, "the second replanning never started"
+        hung_at = plans[1]
+        while not result.done() and t[0] < hung_at + 6.0:
+            frame()
+        assert result.done(), "the goal did not end while its planning step hung"
+        res = result.result().result
+        assert not res.success and "plan_stuck_s" in res.reason
+        assert t[0] > hung_at + 2.0 - 1e-9   # not before plan_stuck_s of device time
+        assert node.running is None and node._abandoned == 1
+        # The node lives on: the next goal plans (on a new thread) while the old one is still stuck.
+        published = len(goals)
+        handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
+        assert handle.accepted
+        for _ in range(10):
+            frame()
+            if len(goals) > published and not motion_from_msg(goals[-1]).is_zero():
+                break
+        assert len(goals) > published and not motion_from_msg(goals[-1]).is_zero(), "the next goal did not plan"
+        ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
+    finally:
+        gate.set()
+
+
+def test_a_finished_step_whose_wake_up_is_lost_is_applied_on_the_next_frame(ros, monkeypatch):
+    """The planning thread wakes the executor with a guard condition; a wake-up that never arrives
+    must cost a frame, not the goal."""
+    from geometry_msgs.msg import Pose2D
+    from ppod_msgs.action import MoveParts
+    from ppod_msgs.msg import PartPoseArray
+    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+
+    import ppod_nodes.field_planner as fp
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.actions import ActionClient
+    from ppod_nodes.common.convert import motion_from_msg
+
+    monkeypatch.setattr(fp.FieldPlannerNode, "_signal_step_done", lambda self, future: None)
+    _active(ros, ros.make(fp.FieldPlannerNode))
+    goals = ros.collect(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+    poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
+    t = [0.0]
+
+    def frame() -> None:
+        poses_pub.publish(_two_washers(t[0]))
+        t[0] = round(t[0] + 0.1, 1)
+        ros.wait_until(lambda: False, 0.1)
+
+    frame()
+    client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
+    assert client.wait_for_server(timeout_sec=10)
+    goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
+                          timeout_s=50.0)
+    handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
+    assert handle.accepted
+    feedback_before = len(goals)
+    for _ in range(100):   # the first step plans for up to a few seconds of wall time
+        frame()
+        if len(goals) > feedback_before:
+            break
+    assert len(goals) > feedback_before and not motion_from_msg(goals[-1]).is_zero(), \
+        "a finished step was never applied"
+    ros.wait_future(handle.cancel_goal_async(), 10, "cancel")

@@ -373,8 +373,6 @@ def test_the_node_reports_each_published_plan_s_latency_in_device_time(ros, monk
     publication. Here the first plan "takes" while /clock advances 0.4 s."""
     import threading
 
-    from geometry_msgs.msg import Pose2D
-    from ppod_msgs.action import MoveParts
     from ppod_msgs.msg import PartPoseArray
     from ppod_msgs.msg import PlateMotion as PlateMotionMsg
     from rclpy.parameter import Parameter
@@ -382,7 +380,6 @@ def test_the_node_reports_each_published_plan_s_latency_in_device_time(ros, monk
 
     import ppod_nodes.field_planner as fp
     from ppod_nodes.common import qos, topics
-    from ppod_nodes.common.actions import ActionClient
     from ppod_nodes.common.convert import seconds_to_stamp
 
     gate, planning = threading.Event(), threading.Event()
@@ -422,12 +419,7 @@ def test_the_node_reports_each_published_plan_s_latency_in_device_time(ros, monk
         return ros.wait_until(lambda: node._poses is not None, 0.2)
 
     assert ros.wait_until(seen, 10.0), "the node never received poses"
-    client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
-    assert client.wait_for_server(timeout_sec=10)
-    goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
-                          timeout_s=50.0)
-    handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
-    assert handle.accepted
+    handle, _, _ = _send_two_washer_goal(ros)
     if not ros.wait_until(planning.is_set, 1.0):   # planned at once on the poses it has, or on the next frame
         frame(1.0)
     assert ros.wait_until(planning.is_set, 10.0), "the node did not plan"
@@ -439,6 +431,48 @@ def test_the_node_reports_each_published_plan_s_latency_in_device_time(ros, monk
     ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
 
 
+def _two_washer_goal(ros, node_class, overrides=()):
+    """An active ``node_class`` (a FieldPlannerNode), the motions it publishes, a function that
+    publishes the next _two_washers frame (device time +0.1 s), its clock [t], and an accepted
+    MoveParts goal handle for the two washers with the client and goal that sent it."""
+    from ppod_msgs.msg import PartPoseArray
+    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
+
+    from ppod_nodes.common import qos, topics
+
+    node = _active(ros, ros.make(node_class, parameter_overrides=list(overrides)))
+    goals = ros.collect(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
+    poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
+    t = [0.0]
+
+    def frame() -> None:
+        poses_pub.publish(_two_washers(t[0]))
+        t[0] = round(t[0] + 0.1, 1)
+        ros.wait_until(lambda: False, 0.1)
+
+    frame()
+    handle, client, goal = _send_two_washer_goal(ros)
+    return node, goals, frame, t, handle, client, goal
+
+
+def _send_two_washer_goal(ros):
+    """Send the MoveParts goal of the lease, latency and stuck-step tests (washers 7 and 9) and
+    wait until it is accepted: (handle, client, goal)."""
+    from geometry_msgs.msg import Pose2D
+    from ppod_msgs.action import MoveParts
+
+    from ppod_nodes.common import topics
+    from ppod_nodes.common.actions import ActionClient
+
+    client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
+    assert client.wait_for_server(timeout_sec=10)
+    goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
+                          timeout_s=50.0)
+    handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
+    assert handle.accepted
+    return handle, client, goal
+
+
 def test_a_planning_step_that_never_returns_ends_the_goal_and_the_node_plans_the_next(ros, monkeypatch):
     """Regression (a demo run on the simulated device): the planning thread did not come back from a
     step, the lease stopped the plate, and the MoveParts goal hung for 5 minutes until the demo's
@@ -446,15 +480,9 @@ def test_a_planning_step_that_never_returns_ends_the_goal_and_the_node_plans_the
     the reason, the thread is abandoned, and the next goal plans on a new one."""
     import threading
 
-    from geometry_msgs.msg import Pose2D
-    from ppod_msgs.action import MoveParts
-    from ppod_msgs.msg import PartPoseArray
-    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
     from rclpy.parameter import Parameter
 
     import ppod_nodes.field_planner as fp
-    from ppod_nodes.common import qos, topics
-    from ppod_nodes.common.actions import ActionClient
     from ppod_nodes.common.convert import motion_from_msg
 
     gate = threading.Event()
@@ -470,24 +498,9 @@ def test_a_planning_step_that_never_returns_ends_the_goal_and_the_node_plans_the
             return super()._plan(t_s, poses, statuses)
 
     monkeypatch.setattr(fp, "MultiTask", HangsOnce)
-    node = _active(ros, ros.make(fp.FieldPlannerNode, parameter_overrides=[Parameter("plan_stuck_s", value=2.0)]))
-    goals = ros.collect(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
-    poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
-    t = [0.0]
-
-    def frame() -> None:
-        poses_pub.publish(_two_washers(t[0]))
-        t[0] = round(t[0] + 0.1, 1)
-        ros.wait_until(lambda: False, 0.1)
-
     try:
-        frame()
-        client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
-        assert client.wait_for_server(timeout_sec=10)
-        goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
-                              timeout_s=50.0)
-        handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
-        assert handle.accepted
+        node, goals, frame, t, handle, client, goal = _two_washer_goal(
+            ros, fp.FieldPlannerNode, [Parameter("plan_stuck_s", value=2.0)])
         result = handle.get_result_async()
         while len(plans) < 2 and t[0] < 5.0:
             frame()
@@ -517,39 +530,16 @@ def test_a_planning_step_that_never_returns_ends_the_goal_and_the_node_plans_the
 def test_a_finished_step_whose_wake_up_is_lost_is_applied_on_the_next_frame(ros, monkeypatch):
     """The planning thread wakes the executor with a guard condition; a wake-up that never arrives
     must cost a frame, not the goal."""
-    from geometry_msgs.msg import Pose2D
-    from ppod_msgs.action import MoveParts
-    from ppod_msgs.msg import PartPoseArray
-    from ppod_msgs.msg import PlateMotion as PlateMotionMsg
-
     import ppod_nodes.field_planner as fp
-    from ppod_nodes.common import qos, topics
-    from ppod_nodes.common.actions import ActionClient
     from ppod_nodes.common.convert import motion_from_msg
 
     monkeypatch.setattr(fp.FieldPlannerNode, "_signal_step_done", lambda self, future: None)
-    _active(ros, ros.make(fp.FieldPlannerNode))
-    goals = ros.collect(PlateMotionMsg, topics.GOAL, qos.COMMANDS)
-    poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
-    t = [0.0]
-
-    def frame() -> None:
-        poses_pub.publish(_two_washers(t[0]))
-        t[0] = round(t[0] + 0.1, 1)
-        ros.wait_until(lambda: False, 0.1)
-
-    frame()
-    client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
-    assert client.wait_for_server(timeout_sec=10)
-    goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
-                          timeout_s=50.0)
-    handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
-    assert handle.accepted
-    feedback_before = len(goals)
+    _, goals, frame, _, handle, _, _ = _two_washer_goal(ros, fp.FieldPlannerNode)
+    published = len(goals)
     for _ in range(100):   # the first step plans for up to a few seconds of wall time
         frame()
-        if len(goals) > feedback_before:
+        if len(goals) > published:
             break
-    assert len(goals) > feedback_before and not motion_from_msg(goals[-1]).is_zero(), \
+    assert len(goals) > published and not motion_from_msg(goals[-1]).is_zero(), \
         "a finished step was never applied"
     ros.wait_future(handle.cancel_goal_async(), 10, "cancel")

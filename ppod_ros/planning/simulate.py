@@ -196,21 +196,26 @@ class ActuatorPlantError:
             self._smax[key] = s_max
         return self._smax[key]
 
+    def _corrected(self, motion, since_switch_s: float, start: float) -> float:
+        """The fraction of an error the feedback has corrected ``since_switch_s`` after the switch:
+        ``start`` (what it predicted) until its first estimate, then the rest learned with time
+        constant ``decay_s``; at most what the checker lets through (``max_correction``)."""
+        t = max(0.0, since_switch_s - self.first_estimate_s)
+        return min(self.max_correction(motion), 1.0 - (1.0 - start) * math.exp(-t / self.decay_s)
+                   if since_switch_s >= self.first_estimate_s else start)
+
     def played(self, motion, since_switch_s: float, goal_number: int):
         if motion is None or motion.is_zero():
             return motion
         start = 0.0 if goal_number <= self.unlearned_goals else 1.0 - self.learned_residual
-        t = max(0.0, since_switch_s - self.first_estimate_s)
-        s = min(self.max_correction(motion), 1.0 - (1.0 - start) * math.exp(-t / self.decay_s)
-                if since_switch_s >= self.first_estimate_s else start)
+        s = self._corrected(motion, since_switch_s, start)
         P = self.uncorrected(motion).phasors()
         X = motion.phasors()
         Y = X + (1.0 - s) * (P - X)
         if not self.third_harmonic:
             return PlateMotion.from_phasors(motion.frequency_hz, motion.k, Y, name=motion.name)
-        # Not predicted by the learned plant: whole until the first estimate, then learned away.
-        left = 1.0 if since_switch_s < self.first_estimate_s else 1.0 - min(
-            self.max_correction(motion), 1.0 - math.exp(-t / self.decay_s))
+        # Not predicted by the learned plant (nothing corrected at the start), then learned away.
+        left = 1.0 - self._corrected(motion, since_switch_s, 0.0)
         k3, D = self.distortion(motion)
         ks = np.union1d(motion.k, k3)
         table = np.zeros((len(ks), 6), complex)

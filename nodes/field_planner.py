@@ -558,22 +558,25 @@ class FieldPlannerNode(PpodLifecycleNode):
 
     def _check_stuck(self, run: _RunningTask, t_s: float) -> None:
         """A planning step pending for more than ``plan_stuck_s`` of device time (from the frame it
-        was planned on) will not be waited for: the goal ends as failed and the plate stops; the
-        planning thread's stack goes to the log and the thread is abandoned (Python cannot stop it),
-        so the next goal plans on a new one."""
+        was planned on) will not be waited for: the planning thread's stack goes to the log and the
+        thread is abandoned (Python cannot stop it), so the next step plans on a new one. When the
+        step is the running goal's, that goal ends as failed and the plate stops; a step of a goal
+        that has ended (cancelled while it hung) no longer holds up the goal now running."""
         pending_run, planned_t, future = self._pending
         limit = float(self.params.get("plan_stuck_s", 10.0))
         age = t_s - planned_t
-        if pending_run is not run or age <= limit or future.done():
+        if age <= limit or future.done():
             return
         self._pending = None
         stuck, self._worker = self._worker, ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
         stuck.shutdown(wait=False, cancel_futures=True)
         self._abandoned += 1
-        self.get_logger().error(f"planning step has not returned after {age:.1f} s of device time "
+        whose = "" if pending_run is run else " (of a goal that has ended)"
+        self.get_logger().error(f"planning step{whose} has not returned after {age:.1f} s of device time "
                                 f"(plan_stuck_s {limit:g} s); abandoned, where it is: {_stacks_of(stuck)}")
-        self._finish(False, f"planning step did not return within plan_stuck_s {limit:g} s of device time "
-                            "(abandoned; see the node's log); plate stopped")
+        if pending_run is run:
+            self._finish(False, f"planning step did not return within plan_stuck_s {limit:g} s of device "
+                                "time (abandoned; see the node's log); plate stopped")
 
     def _apply(self, run: _RunningTask, t_s: float, outcome, publish_motion: bool = True) -> None:
         """Publish a finished step: its motion (when new), the action feedback and the progress."""

@@ -473,17 +473,10 @@ def _send_two_washer_goal(ros):
     return handle, client, goal
 
 
-def test_a_planning_step_that_never_returns_ends_the_goal_and_the_node_plans_the_next(ros, monkeypatch):
-    """Regression (a demo run on the simulated device): the planning thread did not come back from a
-    step, the lease stopped the plate, and the MoveParts goal hung for 5 minutes until the demo's
-    wall-clock guard cancelled it. Past ``plan_stuck_s`` of device time the goal ends as failed with
-    the reason, the thread is abandoned, and the next goal plans on a new one."""
+def _second_plan_hangs(monkeypatch, fp):
+    """Make ``fp.MultiTask`` a planner whose second replanning step does not come back until the
+    returned event is set (the test sets it when done): (event, device times of the steps planned)."""
     import threading
-
-    from rclpy.parameter import Parameter
-
-    import ppod_nodes.field_planner as fp
-    from ppod_nodes.common.convert import motion_from_msg
 
     gate = threading.Event()
     hang = [True]
@@ -498,6 +491,20 @@ def test_a_planning_step_that_never_returns_ends_the_goal_and_the_node_plans_the
             return super()._plan(t_s, poses, statuses)
 
     monkeypatch.setattr(fp, "MultiTask", HangsOnce)
+    return gate, plans
+
+
+def test_a_planning_step_that_never_returns_ends_the_goal_and_the_node_plans_the_next(ros, monkeypatch):
+    """Regression (a demo run on the simulated device): the planning thread did not come back from a
+    step, the lease stopped the plate, and the MoveParts goal hung for 5 minutes until the demo's
+    wall-clock guard cancelled it. Past ``plan_stuck_s`` of device time the goal ends as failed with
+    the reason, the thread is abandoned, and the next goal plans on a new one."""
+    from rclpy.parameter import Parameter
+
+    import ppod_nodes.field_planner as fp
+    from ppod_nodes.common.convert import motion_from_msg
+
+    gate, plans = _second_plan_hangs(monkeypatch, fp)
     try:
         node, goals, frame, t, handle, client, goal = _two_washer_goal(
             ros, fp.FieldPlannerNode, [Parameter("plan_stuck_s", value=2.0)])
@@ -543,3 +550,35 @@ def test_a_finished_step_whose_wake_up_is_lost_is_applied_on_the_next_frame(ros,
     assert len(goals) > published and not motion_from_msg(goals[-1]).is_zero(), \
         "a finished step was never applied"
     ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
+
+
+def test_a_stuck_step_of_a_cancelled_goal_does_not_block_the_next_goal(ros, monkeypatch):
+    """A goal cancelled while its planning step hangs ends at once; the next goal must not wait on
+    that step forever: past ``plan_stuck_s`` the thread is abandoned and the new goal plans."""
+    from rclpy.parameter import Parameter
+
+    import ppod_nodes.field_planner as fp
+    from ppod_nodes.common.convert import motion_from_msg
+
+    gate, plans = _second_plan_hangs(monkeypatch, fp)
+    try:
+        node, goals, frame, t, handle, client, goal = _two_washer_goal(
+            ros, fp.FieldPlannerNode, [Parameter("plan_stuck_s", value=2.0)])
+        while len(plans) < 2 and t[0] < 5.0:
+            frame()
+        assert len(plans) == 2, "the second replanning never started"
+        hung_at = plans[1]
+        ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
+        frame()
+        assert node.running is None, "the cancel did not end the goal"
+        published = len(goals)
+        handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
+        assert handle.accepted
+        while t[0] < hung_at + 6.0 and not (len(goals) > published and not motion_from_msg(goals[-1]).is_zero()):
+            frame()
+        assert len(goals) > published and not motion_from_msg(goals[-1]).is_zero(), \
+            "the next goal waited on the cancelled goal's stuck step"
+        assert node._abandoned == 1 and node.running is not None   # the new goal runs on
+        ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
+    finally:
+        gate.set()

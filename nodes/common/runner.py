@@ -4,8 +4,9 @@
 rclpy context, builds the node, spins it in a thread, and waits for Ctrl-C, SIGTERM, an external
 context shutdown or a crashed executor. On the way out it brings a lifecycle node to a safe,
 finalized state (deactivate, then shutdown) while the executor still runs, so the node can still
-publish its final status, and then tears down in the order that never aborts (ROS_NOTES.md):
-``executor.shutdown(); spin_thread.join(); node.destroy_node(); context.try_shutdown()``.
+publish its final status, and then tears down in the order that never aborts (ROS_NOTES.md), the
+spin thread stopped first: ``halt.set(); spin_thread.join(); executor.shutdown();
+node.destroy_node(); context.try_shutdown()`` (see :func:`spin_until_halted`).
 A second Ctrl-C during that clean-up exits at once.
 
 A launcher asks for real-time scheduling with ``PPOD_REALTIME_PRIORITY`` (the launch configuration's
@@ -56,9 +57,15 @@ def take_realtime_priority(environ=os.environ) -> tuple[str, str] | None:
     return "info", f"real-time priority {priority} (SCHED_FIFO) for the node's threads"
 
 
-def _spin(executor: SingleThreadedExecutor, failure: list[Exception]) -> None:
+def spin_until_halted(executor: SingleThreadedExecutor, failure: list[Exception], halt: threading.Event) -> None:
+    """Spin one callback at a time until ``halt`` is set or the context shuts down. The executor is
+    shut down only after this returns: rclpy 7.1's ``Executor.shutdown()`` does not wait for the
+    callback being dispatched and destroys the guard condition its handler then triggers
+    (``InvalidHandle: cannot use Destroyable because destruction was requested``, seen once in a
+    demo's viz node on the way out)."""
     try:
-        executor.spin()
+        while not halt.is_set() and executor.context.ok():
+            executor.spin_once(timeout_sec=0.1)
     except ExternalShutdownException:
         pass
     except Exception as exc:  # a callback raised: report it, the main thread shuts down
@@ -99,6 +106,7 @@ def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) 
     executor = None
     thread = None
     failure: list[Exception] = []
+    halt = threading.Event()
     status = 0
     try:
         node = factory(context=context)
@@ -106,7 +114,7 @@ def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) 
             getattr(node.get_logger(), realtime[0])(realtime[1])
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        thread = threading.Thread(target=_spin, args=(executor, failure), name="spin", daemon=True)
+        thread = threading.Thread(target=spin_until_halted, args=(executor, failure, halt), name="spin", daemon=True)
         thread.start()
         autostart = getattr(node, "autostart", None)
         if autostart is not None and not autostart():
@@ -125,10 +133,11 @@ def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) 
             except Exception:  # noqa: BLE001 - keep tearing down; the traceback is printed
                 traceback.print_exc()
                 status = status or 1
-        if executor is not None:
-            executor.shutdown()
+        halt.set()
         if thread is not None:
             thread.join(timeout=5.0)
+        if executor is not None:
+            executor.shutdown()
         if node is not None:
             node.destroy_node()
         context.try_shutdown()

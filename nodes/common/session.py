@@ -3,12 +3,12 @@
 Used by the CLI (``ppod goal``, ``ppod echo``, the launcher's lifecycle client) and by the in-process
 node tests. Blocking calls wait on futures from the caller's thread while the executor spins in
 its own (fast and safe per ROS_NOTES.md). :meth:`RosSession.close` tears down in the order that
-never aborts: executor.shutdown, join, destroy nodes, context.try_shutdown.
+never aborts, the spin thread stopped first (``runner.spin_until_halted``): halt, join,
+executor.shutdown, destroy nodes, context.try_shutdown.
 """
 
 from __future__ import annotations
 
-import contextlib
 import threading
 import time
 from collections.abc import Callable
@@ -16,9 +16,10 @@ from typing import Any
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from ppod_nodes.common.runner import spin_until_halted
 from ppod_nodes.ros_env import configure_ros_environment
 from ppod_ros.errors import DeviceError
 
@@ -32,14 +33,15 @@ class RosSession:
         rclpy.init(args=args, context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes: list[Any] = []
+        self.failures: list[Exception] = []   # a callback that raised (its traceback is printed)
+        self._halt = threading.Event()
         self._thread = threading.Thread(target=self._spin, daemon=True, name=f"{name}-spin")
         self._thread.start()
         self.node = self.add(rclpy.create_node(name, context=self.context))
         self._closed = False
 
     def _spin(self) -> None:
-        with contextlib.suppress(ExternalShutdownException):
-            self.executor.spin()
+        spin_until_halted(self.executor, self.failures, self._halt)
 
     def __enter__(self) -> RosSession:
         return self
@@ -91,8 +93,9 @@ class RosSession:
         if self._closed:
             return
         self._closed = True
-        self.executor.shutdown()
+        self._halt.set()
         self._thread.join(timeout=5.0)
+        self.executor.shutdown()
         for node in reversed(self.nodes):
             node.destroy_node()
         self.context.try_shutdown()

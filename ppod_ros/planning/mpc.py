@@ -40,6 +40,7 @@ Nothing here imports rclpy or message types.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -141,6 +142,23 @@ class MpcSettings:
     min_predicted_m: float = 3e-4         # predicted displacements shorter than this teach nothing (15 times
                                           # the tracker's noise; at 1 mm a bracket stuck 1.2 mm from its goal
                                           # under a weak motion kept its scale, and the plan, for 55 s)
+    integral_per_s: float = 0.3           # integral action on a part's position near its goal: the point the
+                                          # planner aims the part at moves by this fraction of the part's
+                                          # position error per second (0: off). Under the weak fields near a
+                                          # goal, the model's friction and the plant error shift the field's
+                                          # zero by more than a 1 mm tolerance, and a velocity scale cannot move
+                                          # a zero: one washer alone to 1 mm (the demo's scene, the loop, 20
+                                          # plant seeds) reached in 8 of 20 without it, 20 of 20 with it
+    integral_within_m: float = 0.005      # ... only while the part is this near its goal
+    integral_after_s: float = 5.0         # ... and once it has been so near for this long in all (a part that
+                                          # settles at once is left as it was)
+    integral_max_m: float = 0.004         # ... the aim at most this far from the goal
+    integral_parts: str = "point"         # ... for "point" parts or "all" commanded parts
+    integral_max_parts: int = 1           # ... only while at most this many parts are commanded. With several,
+                                          # the motions that serve the others move a part too, and its error is
+                                          # not a zero's shift: three parts, loop seeds 1-3, 56/60 and 55/60
+                                          # against 58/60 without (point parts; all parts); one bracket worst
+                                          # 22.5 / 15.5 s against 16.4 / 15.5 s (docs/planner.md)
     stall_s: float = 4.0                  # no 10 % progress over this long: focus on one part ("alternate
     focus_s: float = 3.0                  # motions") for this long, the others' weights times
     focus_others: float = 0.2             # this (a linear field cannot serve every part at once)
@@ -348,6 +366,14 @@ class MpcSettings:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 0):
                 raise ConfigError(f"{name}: expected an integer >= 0 (0: no budget), got {v!r}")
+        for name in ("integral_per_s", "integral_within_m", "integral_after_s", "integral_max_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"{name}: must be >= 0, got {v!r}")
+        if not (isinstance(self.integral_max_parts, int) and self.integral_max_parts >= 0):
+            raise ConfigError(f"integral_max_parts: expected an integer >= 0, got {self.integral_max_parts!r}")
+        if self.integral_parts not in ("all", "point"):
+            raise ConfigError(f"integral_parts: expected 'all' or 'point', got {self.integral_parts!r}")
         v = self.weak_turn_pool_gain
         if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v * self.scale_gain <= 1):
             raise ConfigError(f"weak_turn_pool_gain: expected 0..1/scale_gain (0: off), got {v!r}")
@@ -701,6 +727,9 @@ class _Tracked:
                                                     # over weak segments not yet taught (weak_turn_pool_gain)
     scale_by_name: dict = field(default_factory=dict)  # the translation's per motion name (scale_by_name)
     last_seen: float | None = None
+    aim: tuple[float, float] = (0.0, 0.0)  # integral action: the aim's offset from the goal (m)
+    near_since: float | None = None       # ... when the part first came within integral_within_m
+    aim_t: float | None = None            # ... the frame it was last updated at
 
 
 @dataclass
@@ -720,8 +749,6 @@ def _dim(part: PointPart | RigidPart) -> int:
 
 def _with_friction(part: PointPart | RigidPart, factor: float) -> PointPart | RigidPart:
     """The part model with its friction (kinetic and static) times ``factor``."""
-    import dataclasses
-
     ms = None if part.mu_static is None else np.asarray(part.mu_static) * factor
     if isinstance(part, RigidPart):
         return dataclasses.replace(part, mu=np.asarray(part.mu) * factor, mu_static=ms)
@@ -855,6 +882,7 @@ class MultiTask:
         elapsed = t_s - self.t0
         poses = self._at_rest(t_s, poses)
         statuses = self._statuses(t_s, poses)
+        self._integrate_aims(t_s, poses)
         lost = self.settings.lost_after_s
         missing = [g.index for g in self.goals
                    if self.state[g.index].last_seen is None or t_s - self.state[g.index].last_seen > lost]
@@ -1549,6 +1577,40 @@ class MultiTask:
                 out += both_ways(self._base("rotation"), c, "swap", f"{a.index},{b.index}")
         return out
 
+    def _integrate_aims(self, t_s: float, poses: np.ndarray) -> None:
+        """Integral action (``integral_per_s``; ``integral_parts``, at most ``integral_max_parts``
+        commanded): each frame, the aim of a part within ``integral_within_m`` of its goal (once it has
+        been so near for ``integral_after_s``) moves by the gain times its position error times the
+        frame's interval, within ``integral_max_m``."""
+        s = self.settings
+        if s.integral_per_s <= 0 or len(self.goals) > s.integral_max_parts:
+            return
+        for g in self.goals:
+            st = self.state[g.index]
+            if s.integral_parts == "point" and isinstance(self.parts[g.index], RigidPart):
+                continue
+            p = poses[g.index]
+            ex, ey = g.x_m - float(p[0]), g.y_m - float(p[1])
+            last, st.aim_t = st.aim_t, t_s
+            if not (math.isfinite(ex) and math.isfinite(ey)) or math.hypot(ex, ey) >= s.integral_within_m:
+                continue
+            if st.near_since is None:
+                st.near_since = t_s
+            if last is None or t_s - st.near_since < s.integral_after_s:
+                continue
+            ax = st.aim[0] + s.integral_per_s * ex * (t_s - last)
+            ay = st.aim[1] + s.integral_per_s * ey * (t_s - last)
+            n = math.hypot(ax, ay)
+            f = 1.0 if n <= s.integral_max_m else s.integral_max_m / n
+            st.aim = (ax * f, ay * f)
+
+    def _aimed(self, g: PartGoal) -> PartGoal:
+        """The goal the planner aims the part of ``g`` at: ``g`` moved by its integral action's offset."""
+        ax, ay = self.state[g.index].aim
+        if ax == 0.0 and ay == 0.0:
+            return g
+        return dataclasses.replace(g, x_m=g.x_m + ax, y_m=g.y_m + ay)
+
     def _waypoints(self, poses: np.ndarray, statuses: list[PartStatus]) -> tuple[np.ndarray, np.ndarray]:
         """Per goal: the target configuration after the horizon (G, 3) and the weights (G,)."""
         s, H = self.settings, self.settings.horizon_s
@@ -1556,6 +1618,7 @@ class MultiTask:
         weight = np.ones(len(self.goals))
         approach = self.approach_per_s()
         for k, (g, st) in enumerate(zip(self.goals, statuses)):
+            g = self._aimed(g)
             p = poses[g.index]
             e = np.array([g.x_m - p[0], g.y_m - p[1]])
             d = float(np.hypot(*e))

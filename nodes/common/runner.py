@@ -73,6 +73,17 @@ def spin_until_halted(executor: SingleThreadedExecutor, failure: list[Exception]
         traceback.print_exc()
 
 
+def stop_spinning(executor: SingleThreadedExecutor | None, halt: threading.Event,
+                  thread: threading.Thread | None, timeout_s: float = 5.0) -> None:
+    """Halt :func:`spin_until_halted` and join its thread; the executor is woken (an empty task
+    triggers its guard condition), so an idle ``spin_once`` returns at once, not after its timeout."""
+    halt.set()
+    if executor is not None:
+        executor.create_task(lambda: None)
+    if thread is not None:
+        thread.join(timeout=timeout_s)
+
+
 def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) -> int:
     """Run one node until asked to stop; returns the process exit status.
 
@@ -133,9 +144,7 @@ def run_node(factory: Callable[..., object], argv: Sequence[str] | None = None) 
             except Exception:  # noqa: BLE001 - keep tearing down; the traceback is printed
                 traceback.print_exc()
                 status = status or 1
-        halt.set()
-        if thread is not None:
-            thread.join(timeout=5.0)
+        stop_spinning(executor, halt, thread)
         if executor is not None:
             executor.shutdown()
         if node is not None:

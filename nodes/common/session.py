@@ -19,7 +19,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from ppod_nodes.common.runner import spin_until_halted
+from ppod_nodes.common.runner import spin_until_halted, stop_spinning
 from ppod_nodes.ros_env import configure_ros_environment
 from ppod_ros.errors import DeviceError
 
@@ -93,8 +93,7 @@ class RosSession:
         if self._closed:
             return
         self._closed = True
-        self._halt.set()
-        self._thread.join(timeout=5.0)
+        stop_spinning(self.executor, self._halt, self._thread)
         self.executor.shutdown()
         for node in reversed(self.nodes):
             node.destroy_node()

@@ -18,6 +18,7 @@ thread.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
@@ -79,7 +80,9 @@ def stop_spinning(executor: SingleThreadedExecutor | None, halt: threading.Event
     triggers its guard condition), so an idle ``spin_once`` returns at once, not after its timeout."""
     halt.set()
     if executor is not None:
-        executor.create_task(lambda: None)
+        # An executor already shut down has no guard condition: the thread then ends by its timeout.
+        with contextlib.suppress(Exception):
+            executor.create_task(lambda: None)
     if thread is not None:
         thread.join(timeout=timeout_s)
 

@@ -66,7 +66,7 @@ def _exchange(ros, client_cls, name):
     _server(server, name, release)
     client = client_cls(ros.helper, MovePart, name)
     try:
-        assert client.wait_for_server(timeout_sec=10)
+        ros.wait_for_action_server(client)
         client._client_handle = _PreemptedAfterSend(client._client_handle)
         goal = client.send_goal_async(MovePart.Goal(part_id=1))
         goal_done = ros.wait_until(goal.done, 3.0)
@@ -98,3 +98,22 @@ def test_ppod_client_completes_goal_and_result_when_preempted_after_sending(ros)
     from ppod_nodes.common.actions import ActionClient
 
     assert _exchange(ros, ActionClient, "/test/race_ppod") == (True, True)
+
+
+def test_the_harness_waits_for_an_action_server_in_wall_time_and_says_what_the_graph_shows(ros):
+    """The tests' wait for a server (CI once timed out on an in-process one) fails with the graph's
+    view, and passes as soon as a server appears."""
+    from ppod_msgs.action import MovePart
+    from rclpy.action import ActionServer
+
+    from ppod_nodes.common.actions import ActionClient
+
+    client = ActionClient(ros.helper, MovePart, "/test/harness_wait")
+    shows = (r"/test/harness_wait not discovered within 0.3 s: the graph shows service servers "
+             r"\{'send_goal': 0, 'cancel_goal': 0, 'get_result': 0\}, topic publishers \{'status': 0, 'feedback': 0\}, "
+             r"nodes \[.*'test_helper'")
+    with pytest.raises(AssertionError, match=shows):
+        ros.wait_for_action_server(client, 0.3)
+    ActionServer(ros.helper, MovePart, "/test/harness_wait", execute_callback=lambda handle: MovePart.Result())
+    ros.wait_for_action_server(client, 10.0)
+    client.destroy()

@@ -95,7 +95,7 @@ def test_move_part_brings_a_point_part_to_the_goal_over_tracked_poses(ros):
         publish()
         ros.wait_until(lambda: False, 0.05)
     client = ActionClient(ros.node, MovePart, "/" + topics.MOVE_PART)
-    assert client.wait_for_server(timeout_sec=10)
+    ros.wait_for_action_server(client)
     unknown = MovePart.Goal(part_id=99)
     assert not ros.wait_future(client.send_goal_async(unknown), 10, "goal").accepted  # not tracked
     goal = MovePart.Goal(part_id=7, position_tolerance_m=1e-3, timeout_s=40.0)
@@ -143,7 +143,7 @@ def test_a_sensorless_move_part_positions_a_part_no_camera_sees(ros):
     t = [0.0]
     clock_pub.publish(Clock(clock=seconds_to_stamp(0.0)))
     client = ActionClient(ros.node, MovePart, "/" + topics.MOVE_PART)
-    assert client.wait_for_server(timeout_sec=10)
+    ros.wait_for_action_server(client)
     goal = MovePart.Goal(part_id=3, sensorless=True)  # no tracker: no poses at all
     goal.target.x, goal.target.y = 0.01, -0.015
     feedback = []
@@ -203,7 +203,7 @@ def test_move_parts_brings_two_parts_to_their_own_goals_and_rejects_colliding_go
         publish()
         ros.wait_until(lambda: False, 0.05)
     client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
-    assert client.wait_for_server(timeout_sec=10)
+    ros.wait_for_action_server(client)
     clash = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=0.0, y=0.0), Pose2D(x=0.004, y=0.0)])
     assert not ros.wait_future(client.send_goal_async(clash), 10, "goal").accepted  # footprints overlap
     untracked = MoveParts.Goal(part_ids=[7, 99], targets=[Pose2D(x=0.0, y=0.0), Pose2D(x=0.03, y=0.0)])
@@ -272,7 +272,7 @@ def test_a_late_plan_stops_the_plate_at_the_lease_and_is_dropped(ros, monkeypatc
 
     frame(0.0)
     client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
-    assert client.wait_for_server(timeout_sec=10)
+    ros.wait_for_action_server(client)
     goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
                           timeout_s=50.0)
     feedback = []
@@ -348,7 +348,7 @@ def test_a_planner_error_ends_the_goal_and_stops_the_plate_without_killing_the_n
 
     frame()
     client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
-    assert client.wait_for_server(timeout_sec=10)
+    ros.wait_for_action_server(client)
     goal = MoveParts.Goal(part_ids=[7], targets=[Pose2D(x=-0.02, y=0.01)], timeout_s=30.0)
     handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
     assert handle.accepted
@@ -465,7 +465,7 @@ def _send_two_washer_goal(ros):
     from ppod_nodes.common.actions import ActionClient
 
     client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
-    assert client.wait_for_server(timeout_sec=10)
+    ros.wait_for_action_server(client)
     goal = MoveParts.Goal(part_ids=[7, 9], targets=[Pose2D(x=-0.02, y=0.01), Pose2D(x=0.02, y=-0.01)],
                           timeout_s=50.0)
     handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")

@@ -19,6 +19,24 @@ class RosHarness(RosSession):
             kwargs["parameter_overrides"] = parameter_overrides
         return self.add(factory(context=self.context, **kwargs))
 
+    def wait_for_action_server(self, client, timeout_s: float = 30.0) -> None:
+        """Wait until ``client`` (an rclpy action client) sees its server, ``timeout_s`` of wall time.
+
+        rclpy's ``wait_for_server(timeout_sec=10)`` counts 0.25 s sleeps, not time; and one CI run
+        saw an in-process server still undiscovered after it (the suite's 900th-odd test, 2 cores
+        busy). On failure the assertion says what the helper's graph shows, so a recurrence says
+        whether the server's endpoints were missing or only some of them.
+        """
+        if self.wait_until(client.server_is_ready, timeout_s, step_s=0.05):
+            return
+        name = client._action_name
+        servers = {k: self.helper.count_services(f"{name}/_action/{k}")
+                   for k in ("send_goal", "cancel_goal", "get_result")}
+        publishers = {k: self.helper.count_publishers(f"{name}/_action/{k}") for k in ("status", "feedback")}
+        raise AssertionError(f"action server {name} not discovered within {timeout_s:g} s: the graph shows "
+                             f"service servers {servers}, topic publishers {publishers}, "
+                             f"nodes {sorted(self.helper.get_node_names())}")
+
     def collect(self, msg_type, topic: str, qos) -> list:
         """Subscribe the helper node to ``topic``; returns the list the messages land in."""
         got: list = []

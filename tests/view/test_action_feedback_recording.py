@@ -33,7 +33,7 @@ def test_action_feedback_is_recorded_and_decoded_by_rosbags(ros, tmp_path):
                             discovery_period_s=0.2)
     client = ActionClient(ros.helper, MovePart, "/" + topics.MOVE_PART)
     try:
-        assert client.wait_for_server(timeout_sec=10)
+        ros.wait_for_action_server(client)
         feedback_topic = "/" + topics.MOVE_PART + "/_action/feedback"
         assert ros.wait_until(lambda: feedback_topic in recorder.counts, 10)
         future = client.send_goal_async(MovePart.Goal(part_id=1))

@@ -23,9 +23,9 @@ class RosHarness(RosSession):
         """Wait until ``client`` (an rclpy action client) sees its server, ``timeout_s`` of wall time.
 
         rclpy's ``wait_for_server(timeout_sec=10)`` counts 0.25 s sleeps, not time; and one CI run
-        saw an in-process server still undiscovered after it (the suite's 900th-odd test, 2 cores
-        busy). On failure the assertion says what the helper's graph shows, so a recurrence says
-        whether the server's endpoints were missing or only some of them.
+        (commit 0f3e060) saw an in-process server still undiscovered after it. On failure the
+        assertion says what the helper's graph shows, so a recurrence says whether the server's
+        endpoints were missing or only some of them.
         """
         if self.wait_until(client.server_is_ready, timeout_s, step_s=0.05):
             return

@@ -391,18 +391,13 @@ class MpcSettings:
         v = self.focus_held
         if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= 1):
             raise ConfigError(f"focus_held: expected a factor 0..1 (1: off), got {v!r}")
-        v = self.within_fraction
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1):
-            raise ConfigError(f"within_fraction: expected a fraction 0..1 of the tolerances, got {v!r}")
+        for name in ("within_fraction", "rest_hold_within", "done_within"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1):
+                raise ConfigError(f"{name}: expected a fraction 0..1 of the tolerances, got {v!r}")
         v = self.hold_within
         if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= 1):
             raise ConfigError(f"hold_within: expected a fraction 0..1 of the tolerances or None, got {v!r}")
-        v = self.rest_hold_within
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1):
-            raise ConfigError(f"rest_hold_within: expected a fraction 0..1 of the tolerances, got {v!r}")
-        v = self.done_within
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1):
-            raise ConfigError(f"done_within: expected a fraction 0..1 of the tolerances, got {v!r}")
         v = self.rest_average_after_s
         if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ConfigError(f"rest_average_after_s: must be >= 0 s or None (off), got {v!r}")

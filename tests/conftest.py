@@ -40,8 +40,36 @@ def pytest_configure(config):
         os.environ["PPOD_TEST_HARDWARE_CONFIG"] = str(Path(path).resolve())
 
 
+#: Reruns of a test that runs a ROS graph (marked 'ros' or 'system') after a failure. Those tests
+#: depend on the machine's scheduler and DDS discovery as well as on the code: two fresh-clone CI
+#: runs (on a busy 2-core machine) each failed one of them once, and neither failure came back in
+#: dozens of runs here. A rerun is reported ("R" in the progress, "RERUN" in the summary, "N rerun"
+#: in the last line) and the failed attempt's message is printed at the end (pytest_terminal_summary
+#: below), so a flaky failure still tells its story; a test that fails twice fails the run. Not
+#: against the real device (--hardware), and not for any other test.
+ROS_RERUNS = 1
+_failed_attempts: list[tuple[str, str]] = []
+
+
+def pytest_runtest_logreport(report):
+    if report.outcome == "rerun":
+        crash = getattr(report.longrepr, "reprcrash", None)
+        _failed_attempts.append((report.nodeid, crash.message if crash is not None else str(report.longrepr)))
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _failed_attempts:
+        terminalreporter.section("failed attempts of the rerun tests")
+        for nodeid, message in _failed_attempts:
+            terminalreporter.write_line(f"{nodeid}: {message[:4000]}")
+
+
 def pytest_collection_modifyitems(config, items):
     if not config.getoption("--hardware"):
+        if config.pluginmanager.hasplugin("rerunfailures"):
+            for item in items:
+                if ("ros" in item.keywords or "system" in item.keywords) and not item.get_closest_marker("flaky"):
+                    item.add_marker(pytest.mark.flaky(reruns=ROS_RERUNS))
         return
     skip = pytest.mark.skip(reason="--hardware: only tests marked 'hardware' run against the real device")
     for item in items:

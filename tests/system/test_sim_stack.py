@@ -37,11 +37,29 @@ def _truth_error(msg, goal) -> float:
 
 
 def _device_story(tmp_path) -> str:
-    """The device's state changes and every warning or error in the stack log, for failure messages."""
-    lines = [line for line in log_text(tmp_path).splitlines()
+    """The device's state changes and every warning or error in the stack log, for failure messages
+    (put first in them: a CI report shows only the start of a long message)."""
+    lines = [line.replace(" [INFO] ", " ") for line in log_text(tmp_path).splitlines()
              if "device state" in line or "WARN" in line or "ERROR" in line or "slipped" in line
-             or "starved" in line]
+             or "starved" in line or "heartbeats:" in line]
     return "\n".join(lines[-40:])
+
+
+def _statuses(status) -> str:
+    """The generator's status changes, in one line: 'STATE(reason)' each."""
+    names = ("IDLE", "RAMPING", "ACTIVE", "STOPPING", "REJECTED", "FAULT")  # PlateMotionStatus.STATE_*
+    out = []
+    for m in status:
+        text = (names[m.state] if m.state < len(names) else str(m.state)) + (f"({m.reason})" if m.reason else "")
+        if not out or out[-1] != text:
+            out.append(text)
+    return " -> ".join(out)
+
+
+def _truth_story(truth, goal) -> str:
+    from ppod_nodes.common.convert import stamp_to_seconds
+
+    return ", ".join(f"{stamp_to_seconds(m.header.stamp):.2f}s:{_truth_error(m, goal):.3g}" for m in truth[-30:])
 
 
 def _collect(session, msg_type, topic, qos):
@@ -67,7 +85,8 @@ def test_linesinkx_on_the_plant_without_mismatch_is_within_one_percent(tmp_path)
         # arrive late, so the first messages after ACTIVE may still be from the ramp.
         assert ros.wait_until(lambda: len(truth) >= n + 20, 20)
         errors = [_truth_error(m, goal) for m in truth[-10:]]
-    assert max(errors) <= 0.01, (errors, _device_story(tmp_path))
+    assert max(errors) <= 0.01, (f"{_device_story(tmp_path)}\ngenerator: {_statuses(status)}\n"
+                                 f"truth (stamp: error), ACTIVE seen after {n}: {_truth_story(truth, goal)}")
 
 
 def test_sigkill_of_the_waveform_generator_brings_the_plate_to_rest_within_300_ms(tmp_path):

@@ -19,6 +19,7 @@ Publishes the active motion and its status (transient local), the device status 
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +58,8 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         Param("heartbeat_clock", "wall", "heartbeats on the wall clock from their own thread ('wall', for "
               "real-time devices) or on the ROS clock ('ros': simulated time faster than real time)",
               choices=("wall", "ros")),
+        Param("stall_dump", True, "with wall-clock heartbeats: when the heartbeat thread cannot run for two "
+              "periods, write every thread's Python stack to stderr (the node's log): what held the process"),
         Param("handshake_timeout_s", 5.0, "wait for the device's VERSION reply (s)", min_value=0.1),
         Param("status_rate_hz", 10.0, "rate of PlateMotionStatus and DeviceStatus (Hz)", min_value=0.5,
               max_value=100.0),
@@ -114,7 +117,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
             self._hb_timer = self.create_timer(self.config.can.heartbeat_period_s, self._heartbeat)
         else:
             # Its own thread: a busy executor (or a slow callback) cannot starve the device watchdog.
-            self.link.start_heartbeat()
+            self.link.start_heartbeat(stall_dump=sys.stderr if self.params["stall_dump"] else None)
         self._subs = [
             self.create_subscription(PlateMotionMsg, topics.GOAL, self._on_goal_msg, qos.COMMANDS),
             self.create_subscription(HarmonicCorrection, topics.CORRECTION, self._on_correction, qos.COMMANDS),

@@ -24,6 +24,7 @@ Example
 from __future__ import annotations
 
 import atexit
+import faulthandler
 import logging
 import math
 import threading
@@ -32,6 +33,7 @@ import weakref
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TextIO
 
 import can
 import numpy as np
@@ -208,6 +210,7 @@ class DeviceLink:
         self.on_raw: list[Callable[[RawCapture], None]] = []
         self._seq = 0
         self._hb_counter = 0
+        self._stall_dump: TextIO | None = None
         self._summaries = SummaryAssembler(
             self.n_channels, lambda seq: self.table_frequencies.get(seq, math.nan)
         )
@@ -528,10 +531,23 @@ class DeviceLink:
         if heartbeat:
             self.start_heartbeat()
 
-    def start_heartbeat(self) -> None:
-        """Send heartbeats every ``can.heartbeat_period_s`` of wall-clock time from a thread of their own."""
+    def start_heartbeat(self, stall_dump: TextIO | None = None) -> None:
+        """Send heartbeats every ``can.heartbeat_period_s`` of wall-clock time from a thread of their own.
+
+        ``stall_dump``: a file (with a file descriptor, e.g. ``sys.stderr``) to which every thread's
+        Python stack is written, from outside the interpreter, when the heartbeat thread has not run
+        for two heartbeat periods: what held the process (the GIL) when a heartbeat was late
+        (``faulthandler.dump_traceback_later``, which is process-wide: for a process with one link,
+        the waveform generator's). None: no dump."""
         if self._hb_thread is not None:
             return
+        if stall_dump is not None:
+            try:
+                stall_dump.fileno()
+            except (AttributeError, OSError, ValueError) as exc:   # io.UnsupportedOperation is an OSError
+                log.warning("heartbeat stalls: no stack dump (%s has no file descriptor: %s)", stall_dump, exc)
+                stall_dump = None
+        self._stall_dump = stall_dump
         self._hb_stop.clear()
         self._hb_thread = threading.Thread(target=self._hb_loop, name="ppod-can-heartbeat", daemon=True)
         self._hb_thread.start()
@@ -543,6 +559,9 @@ class DeviceLink:
         if self._hb_thread is not None:
             self._hb_thread.join(timeout=2.0)
         self._hb_thread = None
+        if self._stall_dump is not None:
+            faulthandler.cancel_dump_traceback_later()
+            self._stall_dump = None
 
     def _rx_loop(self) -> None:
         while not self._stop.is_set():
@@ -564,7 +583,13 @@ class DeviceLink:
             last_sent = sent
             # After a stall, beat on from now rather than send the missed heartbeats in a burst.
             next_t = max(next_t + period, sent)
-            self._hb_stop.wait(max(0.0, next_t - time.monotonic()))
+            wait = max(0.0, next_t - time.monotonic())
+            if self._stall_dump is not None:
+                # Armed for the wait and two periods more: only a thread that cannot run disarms late.
+                faulthandler.dump_traceback_later(wait + 2 * period, file=self._stall_dump)
+            self._hb_stop.wait(wait)
+            if self._stall_dump is not None:
+                faulthandler.cancel_dump_traceback_later()
 
     def _heartbeat_interval(self, interval_s: float, woke_late_s: float, send_s: float, period_s: float) -> None:
         c = self.counters

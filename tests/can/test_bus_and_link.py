@@ -274,3 +274,45 @@ def test_heartbeats_stop_when_the_process_exits(config):
     assert not thread.is_alive()
     link.stop_heartbeat()
     assert link not in host._HEARTBEATING
+
+
+def _hold_the_gil(seconds: float) -> None:
+    """Sleep in C without releasing the GIL: no other Python thread of this process can run."""
+    import ctypes
+    import ctypes.util
+
+    libc = ctypes.PyDLL(ctypes.util.find_library("c"))   # PyDLL: the call keeps the GIL
+    libc.usleep(int(seconds * 1e6))
+
+
+def test_a_stalled_heartbeat_thread_dumps_what_held_the_process(config, tmp_path):
+    """The generator's heartbeat thread woke 317 ms late at a fresh-clone CI run's first goal and the
+    device's watchdog tripped; the log said the process was starved, not by what. With ``stall_dump``
+    the threads' stacks are written from outside the interpreter while the stall lasts: here the GIL
+    held (in C) by this test's own function for 20 heartbeat periods."""
+    period = config.can.heartbeat_period_s
+    link = DeviceLink(_StallingBus(stall_s=0.0), config)
+    with open(tmp_path / "dump.txt", "w+") as dump:
+        link.start_heartbeat(stall_dump=dump)
+        time.sleep(3 * period)
+        _hold_the_gil(20 * period)
+        link.stop_heartbeat()
+        text = (tmp_path / "dump.txt").read_text()
+    assert "Timeout" in text
+    assert "test_a_stalled_heartbeat_thread_dumps_what_held_the_process" in text and "_hold_the_gil" in text
+    assert "_hb_loop" in text
+    # Disarmed with the heartbeat thread: a stall after it dumps nothing.
+    size = len(text)
+    _hold_the_gil(5 * period)
+    assert len((tmp_path / "dump.txt").read_text()) == size
+
+
+def test_a_heartbeat_stall_dump_without_a_file_descriptor_is_refused_with_a_warning(config, caplog):
+    import io
+
+    link = DeviceLink(_StallingBus(stall_s=0.0), config)
+    with caplog.at_level("WARNING", logger="ppod_ros.can.host"):
+        link.start_heartbeat(stall_dump=io.StringIO())
+        link.stop_heartbeat()
+    assert link._stall_dump is None
+    assert any("no stack dump" in r.getMessage() for r in caplog.records)

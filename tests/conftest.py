@@ -41,9 +41,11 @@ def pytest_configure(config):
 
 
 #: Reruns of a test that runs a ROS graph (marked 'ros' or 'system') after a failure. Those tests
-#: depend on the machine's scheduler and DDS discovery as well as on the code: two fresh-clone CI
-#: runs (on a busy 2-core machine) each failed one of them once, and neither failure came back in
-#: dozens of runs here. A rerun is reported ("R" in the progress, "RERUN" in the summary, "N rerun"
+#: depend on the machine's scheduler and DDS as well as on the code: three fresh-clone CI runs (on a
+#: busy 2-core machine) each failed one of them once. The one reproduced here (once in 16 runs of
+#: the file beside another stack) was the waveform generator's heartbeat held up 290 ms by a DDS
+#: publish that kept the GIL, and the device's watchdog stopping the plate (CHANGELOG, twenty-sixth
+#: session). A rerun is reported ("R" in the progress, "RERUN" in the summary, "N rerun"
 #: in the last line) and the failed attempt's message is printed at the end (pytest_terminal_summary
 #: below), so a flaky failure still tells its story; a test that fails twice fails the run. Not
 #: against the real device (--hardware), and not for any other test.

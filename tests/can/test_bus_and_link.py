@@ -291,11 +291,17 @@ def test_a_stalled_heartbeat_thread_dumps_what_held_the_process(config, tmp_path
     the threads' stacks are written from outside the interpreter while the stall lasts: here the GIL
     held (in C) by this test's own function for 20 heartbeat periods."""
     period = config.can.heartbeat_period_s
-    link = DeviceLink(_StallingBus(stall_s=0.0), config)
+    bus = _StallingBus(stall_s=0.0)
+    link = DeviceLink(bus, config)
     with open(tmp_path / "dump.txt", "w+") as dump:
         link.start_heartbeat(stall_dump=dump)
-        time.sleep(3 * period)
-        _hold_the_gil(20 * period)
+        deadline = time.monotonic() + 5.0
+        while bus.sends < 2 and time.monotonic() < deadline:   # the thread beats, so it has armed
+            time.sleep(0.01)
+        for _ in range(3):   # (a hold that began between a disarm and the next arm: held again)
+            _hold_the_gil(20 * period)
+            if (tmp_path / "dump.txt").read_text():
+                break
         link.stop_heartbeat()
         text = (tmp_path / "dump.txt").read_text()
     assert "Timeout" in text

@@ -43,7 +43,7 @@ def pytest_configure(config):
 #: Reruns of a test that runs a ROS graph (marked 'ros' or 'system') after a failure. Those tests
 #: depend on the machine's scheduler and DDS as well as on the code: three fresh-clone CI runs (on a
 #: busy 2-core machine) each failed one of them once. The one reproduced here (once in 16 runs of
-#: the file beside another stack) was the waveform generator's heartbeat held up 290 ms by a DDS
+#: the file beside another stack) was the waveform generator's heartbeat held up (340 ms between two) by a DDS
 #: publish that kept the GIL, and the device's watchdog stopping the plate (CHANGELOG, twenty-sixth
 #: session). A rerun is reported ("R" in the progress, "RERUN" in the summary, "N rerun"
 #: in the last line) and the failed attempt's message is printed at the end (pytest_terminal_summary

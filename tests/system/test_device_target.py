@@ -30,7 +30,9 @@ def test_the_device_plays_a_goal_reports_its_status_and_stops(tmp_path):
         status, device = [], []
         ros.node.create_subscription(PlateMotionStatus, topics.MOTION_STATUS, status.append, qos.LATCHED)
         ros.node.create_subscription(DeviceStatus, topics.DEVICE_STATUS, device.append, qos.STREAM)
-        assert ros.wait_until(lambda: len(device) >= 2, 15)
+        # Both readers matched before the goal (a reader matched while a goal plays can hold up the
+        # generator's heartbeat: tests/system/test_sim_stack.py, _matched).
+        assert ros.wait_until(lambda: len(device) >= 2 and status, 15)
         assert device[-1].protocol_version >> 8 == PROTOCOL_VERSION[0]
         assert (device[-1].bus_load > 0) and not device[-1].faults
         goal = PlateMotion.from_yaml_text(SMALL_GOAL)

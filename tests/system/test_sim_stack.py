@@ -23,8 +23,18 @@ def _send_goal(session, text=LINESINKX):
     from ppod_ros.motion import PlateMotion
 
     goal = PlateMotion.from_yaml_text(text)
-    resp = session.call(SetPlateMotion, "/" + topics.SET_MOTION, SetPlateMotion.Request(motion=motion_to_msg(goal)),
-                        timeout_s=15)
+    client = session.node.create_client(SetPlateMotion, "/" + topics.SET_MOTION)
+    try:
+        # A dry run first, with the device at rest: its reply completes the generator's match of this
+        # client's reader, so the goal's reply cannot block the generator with a goal playing (_matched).
+        dry = session.call(SetPlateMotion, "/" + topics.SET_MOTION,
+                           SetPlateMotion.Request(motion=motion_to_msg(goal), dry_run=True), timeout_s=15,
+                           client=client)
+        assert dry.accepted, dry.reason
+        resp = session.call(SetPlateMotion, "/" + topics.SET_MOTION, SetPlateMotion.Request(motion=motion_to_msg(goal)),
+                            timeout_s=15, client=client)
+    finally:
+        session.node.destroy_client(client)
     assert resp.accepted, resp.reason
     return goal
 
@@ -68,6 +78,15 @@ def _collect(session, msg_type, topic, qos):
     return got
 
 
+def _matched(session, *collected, timeout_s=15.0) -> None:
+    """Wait until every collecting subscription has its first message, before a goal. While a new
+    reader of a topic is matched, a publish to it blocks for about 330 ms with the GIL held: a goal
+    playing then loses the generator's heartbeats and the device's watchdog stops the plate (two CI
+    failures; CHANGELOG, twenty-sixth session). These tests are about other things; at rest, before
+    the first goal, the device's watchdog is not armed."""
+    assert session.wait_until(lambda: all(collected), timeout_s), [len(c) for c in collected]
+
+
 def test_linesinkx_on_the_plant_without_mismatch_is_within_one_percent(tmp_path):
     from ppod_msgs.msg import PlateAcceleration, PlateMotionStatus
 
@@ -77,6 +96,7 @@ def test_linesinkx_on_the_plant_without_mismatch_is_within_one_percent(tmp_path)
     with running_stack(tmp_path, [node(SIM, mismatch="zero"), GENERATOR]), RosSession("system_test") as ros:
         truth = _collect(ros, PlateAcceleration, topics.SIM_TRUE_ACCELERATION, qos.STREAM)
         status = _collect(ros, PlateMotionStatus, topics.MOTION_STATUS, qos.LATCHED)
+        _matched(ros, truth, status)
         goal = _send_goal(ros)
         assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_ACTIVE for s in status), 15), \
             _device_story(tmp_path)
@@ -100,6 +120,7 @@ def test_sigkill_of_the_waveform_generator_brings_the_plate_to_rest_within_300_m
     with running_stack(tmp_path, nodes) as stack, RosSession("system_test") as ros:
         truth = _collect(ros, PlateAcceleration, topics.SIM_TRUE_ACCELERATION, qos.STREAM)
         status = _collect(ros, PlateMotionStatus, topics.MOTION_STATUS, qos.LATCHED)
+        _matched(ros, truth, status)
         goal = _send_goal(ros)
         assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_ACTIVE for s in status), 30), \
             log_text(tmp_path)[-3000:]

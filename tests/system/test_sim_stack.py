@@ -57,10 +57,12 @@ def _device_story(tmp_path) -> str:
 
 def _statuses(status) -> str:
     """The generator's status changes, in one line: 'STATE(reason)' each."""
-    names = ("IDLE", "RAMPING", "ACTIVE", "STOPPING", "REJECTED", "FAULT")  # PlateMotionStatus.STATE_*
+    from ppod_ros.actuation.generator import GeneratorState  # numbered as PlateMotionStatus.STATE_*
+
     out = []
     for m in status:
-        text = (names[m.state] if m.state < len(names) else str(m.state)) + (f"({m.reason})" if m.reason else "")
+        name = GeneratorState(m.state).name if m.state in GeneratorState._value2member_map_ else str(m.state)
+        text = name + (f"({m.reason})" if m.reason else "")
         if not out or out[-1] != text:
             out.append(text)
     return " -> ".join(out)

@@ -16,12 +16,18 @@ Sections (all on this machine, no ROS):
            times a second: the generator's goal checks, holding the GIL) and --busy processes keep
            the cores busy, at normal scheduling and at the real-time priority ppod up asks for the
            waveform generator, alternating runs; the device's watchdog trips after 150 ms without one
+  stalls   the host's GIL held in C for --stall-ms (default 330: rclpy's publish holds it that long
+           while Fast DDS matches a new reader of its topic) --stalls times, 1 s apart: the heartbeats'
+           intervals as the device receives them (the bridge and the device's listener in a process of
+           their own), with the host's heartbeat thread alone and with the keeper process whose lease
+           it renews (ppod_ros/can/keeper.py, lease 0.5 s); the device's watchdog trips after 150 ms
 
 examples:
   ppod bench can
   ppod bench can --sections load latency --repeats 500
   ppod bench can --quick
   ppod bench can --sections heartbeat --busy 6 --seconds 15
+  ppod bench can --sections stalls --stalls 20
 """
 
 from __future__ import annotations
@@ -44,7 +50,7 @@ import can
 import numpy as np
 
 HELP = "CAN bus load and goal-to-frame latency (ROS-free path), bridge throughput, simulator speed"
-SECTIONS = ("load", "latency", "node", "bridge", "sim", "heartbeat")
+SECTIONS = ("load", "latency", "node", "bridge", "sim", "heartbeat", "stalls")
 _channels = itertools.count()
 
 
@@ -64,6 +70,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--busy", type=int, default=6,
                         help="heartbeat: busy processes beside the heartbeat's process (default 6)")
+    parser.add_argument("--stalls", type=int, default=20, help="stalls: GIL holds per arm (default 20)")
+    parser.add_argument("--stall-ms", type=float, default=330.0,
+                        help="stalls: how long each GIL hold lasts (ms, default 330)")
     parser.add_argument("--quick", action="store_true", help="short runs (a smoke test of the benchmark)")
 
 
@@ -541,6 +550,108 @@ def bench_heartbeat(args) -> list[dict]:
     return rows
 
 
+#: The device's side of the stall measurement: the localhost bridge on a virtual channel and a listener
+#: that stamps every heartbeat frame with this machine's monotonic clock (shared by its processes);
+#: prints the bridge's address, then the stamps (JSON) at end-of-file on its input.
+_RECORDER = """
+import json, sys, threading, time
+import can
+from ppod_ros.can.protocol import Fn, can_id
+from ppod_sim.bridge import Bridge
+node, channel = int(sys.argv[1]), sys.argv[2]
+bridge = Bridge(channel)
+bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False,
+              can_filters=[{"can_id": can_id(Fn.HEARTBEAT, node), "can_mask": 0x7FF}])
+beats, stop = [], threading.Event()
+def listen():
+    while not stop.is_set():
+        if bus.recv(0.05) is not None:
+            beats.append(time.monotonic())
+threading.Thread(target=listen, daemon=True).start()
+print(bridge.url, flush=True)
+sys.stdin.read()
+stop.set()
+print(json.dumps(beats), flush=True)
+"""
+
+
+class HeartbeatRecorder:
+    """A device-side heartbeat listener behind a bridge, in a process of its own (:data:`_RECORDER`):
+    ``url`` to open a ``remote`` bus on, ``beats()`` the arrival times (``time.monotonic``) at the end."""
+
+    def __init__(self, device_node: int):
+        self.process = subprocess.Popen([sys.executable, "-c", _RECORDER, str(device_node),
+                                         f"heartbeat-recorder-{os.getpid()}-{next(_channels)}"],
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        self.url = self.process.stdout.readline().strip()
+        if not self.url.startswith("ws://127.0.0.1:"):
+            self.kill()
+            raise RuntimeError(f"heartbeat recorder did not start: {self.url!r}")
+
+    def beats(self) -> list[float]:
+        out, _ = self.process.communicate("", timeout=30)
+        return json.loads(out.strip().splitlines()[-1])
+
+    def kill(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(10)
+
+
+def hold_the_gil(seconds: float) -> None:
+    """Sleep in C without releasing the GIL: no other Python thread of this process can run (as while
+    rclpy publishes to a topic whose new reader Fast DDS is matching)."""
+    import ctypes
+    import ctypes.util
+
+    libc = ctypes.PyDLL(ctypes.util.find_library("c"))   # PyDLL: the call keeps the GIL
+    libc.usleep(int(seconds * 1e6))
+
+
+def bench_stalls(args) -> list[dict]:
+    """Heartbeat intervals at the device while the host's GIL is held (see the module docstring)."""
+    from ppod_ros.can import DeviceLink, open_bus
+    from ppod_ros.device import default_device_config
+
+    stalls = 2 if args.quick else max(1, int(args.stalls))
+    hold = float(args.stall_ms) / 1e3
+    config = default_device_config()
+    recorder = HeartbeatRecorder(config.can.device_node_id)
+    windows: dict[str, tuple[float, float]] = {}
+    summaries: dict[str, str] = {}
+    try:
+        config = config.with_can(interface="remote", channel=recorder.url)
+        bus = open_bus(config.can)
+        try:
+            for arm, lease in (("thread", None), ("keeper", 0.5)):
+                link = DeviceLink(bus, config)
+                link.start_heartbeat(keeper_lease_s=lease)
+                deadline = time.monotonic() + 30.0
+                while lease is not None and not link._keeper.ready() and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                time.sleep(0.5)
+                t0 = time.monotonic()
+                for _ in range(stalls):
+                    hold_the_gil(hold)
+                    time.sleep(1.0)
+                windows[arm] = (t0, time.monotonic())
+                link.stop_heartbeat()
+                summaries[arm] = link.counters.keeper
+                time.sleep(0.3)
+        finally:
+            bus.shutdown()
+        beats = np.asarray(recorder.beats())
+    finally:
+        recorder.kill()
+    rows = []
+    for arm, (t0, t1) in windows.items():
+        iv = 1e3 * np.diff(beats[(beats >= t0) & (beats <= t1)])
+        rows.append({"heartbeats_from": "the node's thread" if arm == "thread" else "keeper process (lease 0.5 s)",
+                     "stalls": stalls, "stall_ms": 1e3 * hold, "n": int(iv.size), "median_ms": float(np.median(iv)),
+                     "max_ms": float(iv.max()), "over_150_ms": int(np.sum(iv > 150.0)), "keeper": summaries[arm]})
+    return rows
+
+
 def _print_table(title: str, header: list[str], rows: list[list[str]]) -> None:
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
     print(f"\n{title}")
@@ -641,6 +752,15 @@ def run(args: argparse.Namespace) -> int:
             ["process scheduling", "sends", "median ms", "p99 ms", "max ms", "> 100 ms"],
             [[r["scheduling"], str(r["n"]), f"{r['median_ms']:.1f}", f"{r['p99_ms']:.1f}", f"{r['max_ms']:.1f}",
               str(r["over_100_ms"])] for r in rows],
+        )
+    if "stalls" in args.sections:
+        rows = result["stalls"] = bench_stalls(args)
+        _print_table(
+            f"Heartbeats at the device while the host's GIL is held for {args.stall_ms:g} ms, {rows[0]['stalls']} "
+            f"times 1 s apart (period 50 ms; the watchdog trips after 150 ms)",
+            ["heartbeats from", "intervals", "median ms", "max ms", "> 150 ms (watchdog trips)"],
+            [[r["heartbeats_from"], str(r["n"]), f"{r['median_ms']:.1f}", f"{r['max_ms']:.1f}", str(r["over_150_ms"])]
+             for r in rows],
         )
     if "machine" in result:
         print(

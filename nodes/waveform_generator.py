@@ -37,6 +37,7 @@ from ppod_nodes.common.runner import make_main
 from ppod_ros.actuation.generator import GeneratorState, GoalOutcome, WaveformGenerator
 from ppod_ros.actuation.planning import GoalPlanner
 from ppod_ros.can import DeviceLink, open_bus, open_bus_waiting, send_estop
+from ppod_ros.can.keeper import keeper_supported
 from ppod_ros.can.load import MeteredBus
 from ppod_ros.can.protocol import MAX_RAW_CYCLES
 from ppod_ros.device import load_device_config
@@ -58,8 +59,16 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         Param("heartbeat_clock", "wall", "heartbeats on the wall clock from their own thread ('wall', for "
               "real-time devices) or on the ROS clock ('ros': simulated time faster than real time)",
               choices=("wall", "ros")),
+        Param("heartbeat_keeper", "auto", "with wall-clock heartbeats: 'process' sends them from a keeper process "
+              "whose lease the node renews (a stall of this process's Python shorter than the lease, e.g. a DDS "
+              "publish while a new reader is matched, does not stop them), 'thread' from the node's own thread, "
+              "'auto' a keeper where the bus allows a second process (remote, socketcan)",
+              choices=("auto", "process", "thread")),
+        Param("heartbeat_lease_s", 0.5, "the keeper's lease: it stops beating when the node has not renewed it for "
+              "this long (a frozen node; a dead one stops it at once) (s)", min_value=0.1, max_value=2.0),
         Param("stall_dump", True, "with wall-clock heartbeats: when the heartbeat thread cannot run for two "
-              "periods, write every thread's Python stack to stderr (the node's log): what held the process"),
+              "periods (with a keeper: its lease), write every thread's Python stack to stderr (the node's "
+              "log): what held the process"),
         Param("handshake_timeout_s", 5.0, "wait for the device's VERSION reply (s)", min_value=0.1),
         Param("status_rate_hz", 10.0, "rate of PlateMotionStatus and DeviceStatus (Hz)", min_value=0.5,
               max_value=100.0),
@@ -116,8 +125,17 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         if self.params["heartbeat_clock"] == "ros":
             self._hb_timer = self.create_timer(self.config.can.heartbeat_period_s, self._heartbeat)
         else:
-            # Its own thread: a busy executor (or a slow callback) cannot starve the device watchdog.
-            self.link.start_heartbeat(stall_dump=sys.stderr if self.params["stall_dump"] else None)
+            # Its own thread: a busy executor (or a slow callback) cannot starve the device watchdog;
+            # with a keeper process, neither can anything that holds this process's GIL for less
+            # than the lease (ppod_ros/can/keeper.py).
+            keeper = self.params["heartbeat_keeper"]
+            interface = self.config.can.interface
+            if keeper == "process" and not keeper_supported(interface):
+                self.get_logger().warning(f"heartbeat_keeper 'process': the {interface} backend cannot be opened "
+                                          f"by a second process; heartbeats from the node's thread")
+            use = keeper == "process" or (keeper == "auto" and keeper_supported(interface))
+            self.link.start_heartbeat(stall_dump=sys.stderr if self.params["stall_dump"] else None,
+                                      keeper_lease_s=self.params["heartbeat_lease_s"] if use else None)
         self._subs = [
             self.create_subscription(PlateMotionMsg, topics.GOAL, self._on_goal_msg, qos.COMMANDS),
             self.create_subscription(HarmonicCorrection, topics.CORRECTION, self._on_correction, qos.COMMANDS),
@@ -146,10 +164,11 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         self.link.stop_heartbeat()
         c = self.link.counters
         if c.heartbeat_max_interval_s > 0:
-            (self.get_logger().warning if c.heartbeats_late else self.get_logger().info)(
+            (self.get_logger().warning if c.heartbeats_lost else self.get_logger().info)(
                 f"heartbeats: longest interval {1e3 * c.heartbeat_max_interval_s:.0f} ms "
                 f"(period {1e3 * self.config.can.heartbeat_period_s:.0f} ms); {c.heartbeats_late} more than "
-                f"two periods apart")
+                f"two periods apart, {c.heartbeats_lost} of them not covered by a keeper"
+                + (f"; keeper: {c.keeper}" if c.keeper else ""))
         self._publish_status()
 
     def on_cleanup_node(self):

@@ -170,6 +170,12 @@ class LinkCounters:
     #: process starved: the device's watchdog allows three), and the longest interval seen (s).
     heartbeats_late: int = 0
     heartbeat_max_interval_s: float = 0.0
+    #: ... of them, those no keeper process covered (its lease ran out, or none beat): heartbeats the
+    #: device missed.
+    heartbeats_lost: int = 0
+    #: Lease renewals sent to the heartbeat keeper process, and its summary line ("" without one).
+    keeper_renewals: int = 0
+    keeper: str = ""
     extra: dict = field(default_factory=dict)
 
 
@@ -220,6 +226,7 @@ class DeviceLink:
         self._cv = threading.Condition()
         self._thread: threading.Thread | None = None
         self._hb_thread: threading.Thread | None = None
+        self._keeper = None   # HeartbeatKeeper while the heartbeats have one
         self._stop = threading.Event()
         self._hb_stop = threading.Event()
 
@@ -531,16 +538,34 @@ class DeviceLink:
         if heartbeat:
             self.start_heartbeat()
 
-    def start_heartbeat(self, stall_dump: TextIO | None = None) -> None:
+    def start_heartbeat(self, stall_dump: TextIO | None = None, keeper_lease_s: float | None = None) -> None:
         """Send heartbeats every ``can.heartbeat_period_s`` of wall-clock time from a thread of their own.
 
         ``stall_dump``: a file (with a file descriptor, e.g. ``sys.stderr``) to which every thread's
         Python stack is written, from outside the interpreter, when the heartbeat thread has not run
         for two heartbeat periods: what held the process (the GIL) when a heartbeat was late
         (``faulthandler.dump_traceback_later``, which is process-wide: for a process with one link,
-        the waveform generator's). None: no dump."""
+        the waveform generator's). None: no dump.
+
+        ``keeper_lease_s``: the heartbeats are sent by a keeper process
+        (:class:`~ppod_ros.can.keeper.HeartbeatKeeper`) whose lease the thread renews every period
+        for this long, so that a thread held off the GIL for less than the lease does not stop them.
+        Until the keeper is ready, and once it is gone, the thread sends them itself. None: the thread
+        alone (and for a backend a second process cannot open, ``keeper_supported``)."""
         if self._hb_thread is not None:
             return
+        self._keeper = None
+        if keeper_lease_s is not None:
+            from ppod_ros.can.keeper import HeartbeatKeeper, keeper_supported
+
+            if not keeper_supported(self.config.can.interface):
+                log.info("heartbeats from this process's thread: the %s backend cannot be opened by a keeper "
+                         "process", self.config.can.interface)
+            else:
+                try:
+                    self._keeper = HeartbeatKeeper(self.config.can, keeper_lease_s)
+                except (ConfigError, DeviceError) as exc:
+                    log.warning("heartbeats from this process's thread: %s", exc)
         if stall_dump is not None:
             try:
                 stall_dump.fileno()
@@ -559,6 +584,10 @@ class DeviceLink:
         if self._hb_thread is not None:
             self._hb_thread.join(timeout=2.0)
         self._hb_thread = None
+        keeper, self._keeper = self._keeper, None
+        if keeper is not None:
+            self.counters.keeper = keeper.close()
+            log.info("heartbeat keeper (pid %d): %s", keeper.pid, self.counters.keeper)
         if self._stall_dump is not None:
             faulthandler.cancel_dump_traceback_later()
             self._stall_dump = None
@@ -573,10 +602,19 @@ class DeviceLink:
         last_sent = None
         while not (self._stop.is_set() or self._hb_stop.is_set()):
             woke = time.monotonic()
-            try:
-                self.heartbeat()
-            except DeviceError as exc:
-                log.warning("heartbeat not sent: %s", exc)
+            keeper = self._keeper
+            if keeper is not None and keeper.ready() and keeper.renew():
+                self.counters.keeper_renewals += 1
+            else:
+                if keeper is not None and not keeper.alive():
+                    log.warning("the heartbeat keeper (pid %d) is gone (exit code %s): heartbeats from this "
+                                "process's thread", keeper.pid, keeper.process.returncode)
+                    self._keeper = None
+                    self.counters.keeper = f"gone (exit code {keeper.process.returncode})"
+                try:
+                    self.heartbeat()
+                except DeviceError as exc:
+                    log.warning("heartbeat not sent: %s", exc)
             sent = time.monotonic()
             if last_sent is not None:
                 self._heartbeat_interval(sent - last_sent, woke - next_t, sent - woke, period)
@@ -585,8 +623,11 @@ class DeviceLink:
             next_t = max(next_t + period, sent)
             wait = max(0.0, next_t - time.monotonic())
             if self._stall_dump is not None:
-                # Armed for the wait and two periods more: only a thread that cannot run disarms late.
-                faulthandler.dump_traceback_later(wait + 2 * period, file=self._stall_dump)
+                # Armed for the wait and two periods more (with a keeper: its lease, the stall that
+                # stops the heartbeats): only a thread that cannot run disarms late.
+                keeper = self._keeper
+                grace = keeper.lease_s if keeper is not None and keeper.ready() else 2 * period
+                faulthandler.dump_traceback_later(wait + grace, file=self._stall_dump)
             self._hb_stop.wait(wait)
             if self._stall_dump is not None:
                 faulthandler.cancel_dump_traceback_later()
@@ -597,9 +638,18 @@ class DeviceLink:
         if interval_s > 2 * period_s:
             # Said where it happens: a watchdog trip after it is this host's, not the device's.
             c.heartbeats_late += 1
-            log.warning("heartbeat sent %.0f ms after the one before (period %.0f ms): the thread woke "
-                        "%.0f ms late and the send took %.0f ms; this process is starved", 1e3 * interval_s,
-                        1e3 * period_s, 1e3 * max(woke_late_s, 0.0), 1e3 * send_s)
+            keeper = self._keeper
+            keeping = keeper is not None and keeper.ready()
+            covered = keeping and interval_s < keeper.lease_s
+            c.heartbeats_lost += not covered
+            after = ""
+            if keeping:
+                after = (f"; the heartbeat keeper beat on (lease {1e3 * keeper.lease_s:.0f} ms)" if covered
+                         else "; the keeper's lease ran out: it stopped beating")
+            (log.info if covered else log.warning)(
+                "%s %.0f ms after the one before (period %.0f ms): the thread woke %.0f ms late and the send "
+                "took %.0f ms; this process is starved%s", "lease renewed" if keeping else "heartbeat sent",
+                1e3 * interval_s, 1e3 * period_s, 1e3 * max(woke_late_s, 0.0), 1e3 * send_s, after)
 
     def stop(self) -> None:
         """Stop the background threads (the bus stays open: the caller owns it)."""

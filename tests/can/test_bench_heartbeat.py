@@ -23,3 +23,15 @@ def test_the_heartbeat_section_measures_both_schedulings_and_reports_whether_rea
     else:
         assert realtime["scheduling"].endswith("not granted, normal")
         assert "not granted" in realtime["node_said"]
+
+
+def test_the_stalls_section_holds_the_gil_and_measures_the_heartbeats_at_the_device_for_both_arms():
+    from ppod_bench.can import bench_stalls
+
+    rows = bench_stalls(argparse.Namespace(quick=True, stalls=20, stall_ms=330.0))
+    assert [r["heartbeats_from"] for r in rows] == ["the node's thread", "keeper process (lease 0.5 s)"]
+    thread, keeper = rows
+    assert thread["stalls"] == keeper["stalls"] == 2            # --quick
+    assert thread["over_150_ms"] == 2 and thread["max_ms"] >= 330.0   # no heartbeat while the GIL is held
+    assert keeper["max_ms"] < 330.0                              # the keeper beat through every stall
+    assert keeper["keeper"].startswith("sent ") and thread["keeper"] == ""

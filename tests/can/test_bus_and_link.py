@@ -9,6 +9,7 @@ import can
 import numpy as np
 import pytest
 
+from ppod_bench.can import hold_the_gil
 from ppod_ros.actuation.planning import GoalPlanner
 from ppod_ros.can import PROTOCOL_VERSION, AckResult, DeviceLink, DeviceState, FaultInjectingBus, open_bus, send_estop
 from ppod_ros.can.codec import FrameCounters, Heartbeat, Version
@@ -276,15 +277,6 @@ def test_heartbeats_stop_when_the_process_exits(config):
     assert link not in host._HEARTBEATING
 
 
-def _hold_the_gil(seconds: float) -> None:
-    """Sleep in C without releasing the GIL: no other Python thread of this process can run."""
-    import ctypes
-    import ctypes.util
-
-    libc = ctypes.PyDLL(ctypes.util.find_library("c"))   # PyDLL: the call keeps the GIL
-    libc.usleep(int(seconds * 1e6))
-
-
 def test_a_stalled_heartbeat_thread_dumps_what_held_the_process(config, tmp_path):
     """The generator's heartbeat thread woke 317 ms late at a fresh-clone CI run's first goal and the
     device's watchdog tripped; the log said the process was starved, not by what. With ``stall_dump``
@@ -299,17 +291,17 @@ def test_a_stalled_heartbeat_thread_dumps_what_held_the_process(config, tmp_path
         while bus.sends < 2 and time.monotonic() < deadline:   # the thread beats, so it has armed
             time.sleep(0.01)
         for _ in range(3):   # (a hold that began between a disarm and the next arm: held again)
-            _hold_the_gil(20 * period)
+            hold_the_gil(20 * period)
             if (tmp_path / "dump.txt").read_text():
                 break
         link.stop_heartbeat()
         text = (tmp_path / "dump.txt").read_text()
     assert "Timeout" in text
-    assert "test_a_stalled_heartbeat_thread_dumps_what_held_the_process" in text and "_hold_the_gil" in text
+    assert "test_a_stalled_heartbeat_thread_dumps_what_held_the_process" in text and "hold_the_gil" in text
     assert "_hb_loop" in text
     # Disarmed with the heartbeat thread: a stall after it dumps nothing.
     size = len(text)
-    _hold_the_gil(5 * period)
+    hold_the_gil(5 * period)
     assert len((tmp_path / "dump.txt").read_text()) == size
 
 

@@ -69,7 +69,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--repeats", type=int, default=200, help="goals per latency measurement (default 200)"
     )
     parser.add_argument("--busy", type=int, default=6,
-                        help="heartbeat: busy processes beside the heartbeat's process (default 6)")
+                        help="heartbeat, stalls: busy processes beside the heartbeat's process (default 6)")
     parser.add_argument("--stalls", type=int, default=20, help="stalls: GIL holds per arm (default 20)")
     parser.add_argument("--stall-ms", type=float, default=330.0,
                         help="stalls: how long each GIL hold lasts (ms, default 330)")
@@ -610,46 +610,58 @@ def hold_the_gil(seconds: float) -> None:
 
 def bench_stalls(args) -> list[dict]:
     """Heartbeat intervals at the device while the host's GIL is held (see the module docstring)."""
-    from ppod_ros.can import DeviceLink, open_bus
+    from ppod_bench.solver_stalls import busy_core
     from ppod_ros.device import default_device_config
 
     stalls = 2 if args.quick else max(1, int(args.stalls))
     hold = float(args.stall_ms) / 1e3
+    busy = int(getattr(args, "busy", 0))
     config = default_device_config()
     recorder = HeartbeatRecorder(config.can.device_node_id)
     windows: dict[str, tuple[float, float]] = {}
     summaries: dict[str, str] = {}
-    try:
-        config = config.with_can(interface="remote", channel=recorder.url)
-        bus = open_bus(config.can)
+    with contextlib.ExitStack() as stack:
+        if busy:
+            stack.enter_context(busy_core(count=busy))
         try:
-            for arm, lease in (("thread", None), ("keeper", 0.5)):
-                link = DeviceLink(bus, config)
-                link.start_heartbeat(keeper_lease_s=lease)
-                deadline = time.monotonic() + 30.0
-                while lease is not None and not link._keeper.ready() and time.monotonic() < deadline:
-                    time.sleep(0.01)
-                time.sleep(0.5)
-                t0 = time.monotonic()
-                for _ in range(stalls):
-                    hold_the_gil(hold)
-                    time.sleep(1.0)
-                windows[arm] = (t0, time.monotonic())
-                link.stop_heartbeat()
-                summaries[arm] = link.counters.keeper
-                time.sleep(0.3)
+            _stall_arms(recorder, config, stalls, hold, windows, summaries)
+            beats = np.asarray(recorder.beats())
         finally:
-            bus.shutdown()
-        beats = np.asarray(recorder.beats())
-    finally:
-        recorder.kill()
+            recorder.kill()
     rows = []
     for arm, (t0, t1) in windows.items():
         iv = 1e3 * np.diff(beats[(beats >= t0) & (beats <= t1)])
         rows.append({"heartbeats_from": "the node's thread" if arm == "thread" else "keeper process (lease 0.5 s)",
-                     "stalls": stalls, "stall_ms": 1e3 * hold, "n": int(iv.size), "median_ms": float(np.median(iv)),
-                     "max_ms": float(iv.max()), "over_150_ms": int(np.sum(iv > 150.0)), "keeper": summaries[arm]})
+                     "stalls": stalls, "stall_ms": 1e3 * hold, "busy_processes": busy, "n": int(iv.size),
+                     "median_ms": float(np.median(iv)), "max_ms": float(iv.max()),
+                     "over_150_ms": int(np.sum(iv > 150.0)), "keeper": summaries[arm]})
     return rows
+
+
+def _stall_arms(recorder: HeartbeatRecorder, config, stalls: int, hold: float, windows: dict, summaries: dict) -> None:
+    """Both arms of :func:`bench_stalls` against ``recorder``: each arm's window and keeper summary."""
+    from ppod_ros.can import DeviceLink, open_bus
+
+    config = config.with_can(interface="remote", channel=recorder.url)
+    bus = open_bus(config.can)
+    try:
+        for arm, lease in (("thread", None), ("keeper", 0.5)):
+            link = DeviceLink(bus, config)
+            link.start_heartbeat(keeper_lease_s=lease)
+            deadline = time.monotonic() + 30.0
+            while lease is not None and not link._keeper.ready() and time.monotonic() < deadline:
+                time.sleep(0.01)
+            time.sleep(0.5)
+            t0 = time.monotonic()
+            for _ in range(stalls):
+                hold_the_gil(hold)
+                time.sleep(1.0)
+            windows[arm] = (t0, time.monotonic())
+            link.stop_heartbeat()
+            summaries[arm] = link.counters.keeper
+            time.sleep(0.3)
+    finally:
+        bus.shutdown()
 
 
 def _print_table(title: str, header: list[str], rows: list[list[str]]) -> None:
@@ -757,7 +769,8 @@ def run(args: argparse.Namespace) -> int:
         rows = result["stalls"] = bench_stalls(args)
         _print_table(
             f"Heartbeats at the device while the host's GIL is held for {args.stall_ms:g} ms, {rows[0]['stalls']} "
-            f"times 1 s apart (period 50 ms; the watchdog trips after 150 ms)",
+            f"times 1 s apart, {rows[0]['busy_processes']} busy processes (period 50 ms; the watchdog trips "
+            f"after 150 ms)",
             ["heartbeats from", "intervals", "median ms", "max ms", "> 150 ms (watchdog trips)"],
             [[r["heartbeats_from"], str(r["n"]), f"{r['median_ms']:.1f}", f"{r['max_ms']:.1f}", str(r["over_150_ms"])]
              for r in rows],

@@ -18,8 +18,9 @@ to the keeper's standard input every heartbeat period, and each byte renews the 
   an in-process thread, and no later;
 - the host's Python is held for less than ``lease_s`` (the DDS stall): the keeper beats on and the
   plate keeps its motion;
-- the keeper itself dies or is stopped: its heartbeats stop and the watchdog trips; the host sees it
-  gone and sends the heartbeats from its own thread again.
+- the keeper itself dies: the host sees it gone and sends the heartbeats from its own thread again;
+  a keeper that is stopped (SIGSTOP) sends none and the watchdog trips (the host's renewals fail
+  once the pipe is full, and its thread beats again).
 
 The keeper opens its own connection to the bus with the host's CAN settings, with a receive filter
 that matches no frame (it only sends). That needs a bus more than one process can open: the
@@ -114,6 +115,9 @@ class HeartbeatKeeper:
                                             close_fds=True)
         except OSError as exc:
             raise DeviceError(f"heartbeat keeper not started: {exc}") from exc
+        # Never block the host's heartbeat thread: a keeper that stopped reading (SIGSTOP) fills the
+        # pipe after 64 KiB of renewals, and a renewal then fails (the thread beats itself).
+        os.set_blocking(self.process.stdin.fileno(), False)
         self._ready = threading.Event()
         self._lines: list[str] = []
         self._reader = threading.Thread(target=self._read, name="ppod-keeper-out", daemon=True)
@@ -139,10 +143,10 @@ class HeartbeatKeeper:
         return self.process.poll() is None
 
     def renew(self) -> bool:
-        """Renew the lease; False when the keeper is gone."""
+        """Renew the lease; False when the keeper is gone or has stopped reading."""
         try:
             os.write(self.process.stdin.fileno(), b".")
-        except (OSError, ValueError):   # BrokenPipeError: gone; ValueError: closed
+        except (OSError, ValueError):   # BrokenPipeError: gone; BlockingIOError: not reading; ValueError: closed
             return False
         return True
 

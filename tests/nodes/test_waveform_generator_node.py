@@ -249,3 +249,51 @@ def test_a_generator_destroyed_without_its_shutdown_stops_its_heartbeats(ros, si
     node.destroy_node()
     assert len(heartbeat_threads()) == before
     assert ros.wait_until(lambda: sim.device.state == DeviceState.WATCHDOG, 10)
+
+
+def test_over_the_bridge_the_generator_heartbeats_from_a_keeper_process(ros, sim, capfd):
+    """On a bus a second process can open (the simulator's bridge here, SocketCAN in a lab) the
+    generator's heartbeats come from a keeper process whose lease the node renews: a DDS publish that
+    held the node's GIL for ~330 ms had tripped the device's watchdog (docs/device.md, "Heartbeat
+    keeper"). The plate plays a goal on the keeper's heartbeats and the node reports the keeper's count."""
+    from ppod_msgs.srv import SetPlateMotion
+    from rclpy.parameter import Parameter
+
+    from ppod_nodes.common import topics
+    from ppod_nodes.waveform_generator import WaveformGeneratorNode
+    from ppod_ros.can import DeviceState
+
+    node = ros.make(WaveformGeneratorNode, parameter_overrides=[
+        Parameter("can_interface", value="remote"), Parameter("can_channel", value=sim.sim.url)])
+    node.trigger_configure()
+    node.trigger_activate()
+    assert node.lifecycle_state == "active"
+    keeper = node.link._keeper
+    assert keeper is not None
+    assert ros.wait_until(keeper.ready, 20)
+    resp = ros.call(SetPlateMotion, "/" + topics.SET_MOTION, _request(LINESINKX), timeout_s=10)
+    assert resp.accepted, resp.reason
+    assert ros.wait_until(lambda: sim.device.state == DeviceState.ENABLED and sim.device.time_s > 2.0, 20)
+    renewals = node.link.counters.keeper_renewals
+    assert ros.wait_until(lambda: node.link.counters.keeper_renewals > renewals + 5, 5)
+    assert sim.device.state == DeviceState.ENABLED          # never WATCHDOG: the keeper beats
+    node.trigger_deactivate()
+    assert ros.wait_until(lambda: sim.device.state == DeviceState.DISABLED, 5)
+    assert keeper.process.poll() is not None                 # ended with the heartbeats
+    assert "keeper: sent " in capfd.readouterr().err
+
+
+def test_a_keeper_asked_for_on_a_bus_one_process_owns_falls_back_to_the_thread_and_says_so(ros, sim, capfd):
+    from rclpy.parameter import Parameter
+
+    from ppod_nodes.waveform_generator import WaveformGeneratorNode
+
+    node = ros.make(WaveformGeneratorNode, parameter_overrides=[
+        Parameter("can_interface", value="virtual"), Parameter("can_channel", value=sim.channel),
+        Parameter("heartbeat_keeper", value="process")])
+    node.trigger_configure()
+    node.trigger_activate()
+    assert node.lifecycle_state == "active"
+    assert node.link._keeper is None and node.link._hb_thread.is_alive()
+    node.trigger_deactivate()
+    assert "cannot be opened by a second process; heartbeats from the node's thread" in capfd.readouterr().err

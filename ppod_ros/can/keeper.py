@@ -28,6 +28,11 @@ simulator's localhost bridge (``remote``) and SocketCAN. python-can's ``virtual`
 only; there, and on vendor backends that give a channel to one process, the host keeps its thread
 (:func:`keeper_supported`).
 
+A send that fails (bus-off) is skipped and logged (the 1st, 10th, 100th, then every 1000th), and
+the keeper keeps trying: the host's own sends fail on such a bus as well, and the device's watchdog
+ramps the plate down until the bus recovers. Its summary line (``HeartbeatKeeper.close``, in the
+host's log) counts them.
+
 Interrupts: the keeper ignores SIGINT and SIGTERM, which a launcher sends to the whole process group.
 The host then ramps the plate down with the keeper still beating, and the keeper ends when the
 host closes the pipe or exits.
@@ -65,9 +70,6 @@ NO_FRAMES = [{"can_id": 0, "can_mask": 0x1FFFFFFF, "extended": True}]
 #: The keeper exits after its lease has been out this long (a host that stopped renewing for good;
 #: end-of-file is the normal end).
 ORPHAN_AFTER_S = 30.0
-
-#: Keeper start-up bound: the host sends its own heartbeats until the keeper reports it is ready.
-READY_TIMEOUT_S = 20.0
 
 _BOOTSTRAP = (
     "import os, sys\n"
@@ -231,7 +233,8 @@ def main(spec_json: str, policy: int = os.SCHED_OTHER, priority: int = 0) -> int
         sent += 1
         if now - renewed > 2 * period:
             covered += 1   # a beat the host's own thread would have missed
-    summary = f"sent {sent} heartbeats, {covered} while the host's renewal was late, lease out {expired} times"
+    summary = (f"sent {sent} heartbeats, {covered} while the host's renewal was late, lease out {expired} times"
+               + (f", {errors} not sent (bus errors)" if errors else ""))
     with contextlib.suppress(OSError):
         os.write(sys.stdout.fileno(), f"{summary}\n".encode())
     closing.set()

@@ -49,7 +49,7 @@ from pathlib import Path
 import can
 import numpy as np
 
-HELP = "CAN bus load and goal-to-frame latency (ROS-free path), bridge throughput, simulator speed"
+HELP = "CAN bus load and goal-to-frame latency (ROS-free path), bridge throughput, simulator speed, heartbeats"
 SECTIONS = ("load", "latency", "node", "bridge", "sim", "heartbeat", "stalls")
 _channels = itertools.count()
 

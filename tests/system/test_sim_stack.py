@@ -154,6 +154,67 @@ def test_sigkill_of_the_waveform_generator_brings_the_plate_to_rest_within_300_m
     assert "waveform_generator stopped (killed by SIGKILL)" in log_text(tmp_path)
 
 
+#: A lab's tool joining the graph: its own process and participant, readers of the generator's topics.
+_JOINER = """
+import sys, time
+import rclpy
+from rclpy.qos import QoSProfile, DurabilityPolicy, ReliabilityPolicy
+from ppod_msgs.msg import DeviceStatus, PlateMotion, PlateMotionStatus
+rclpy.init()
+node = rclpy.create_node(f"joiner_{sys.argv[1]}")
+latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+status_topic, active_topic, device_topic = sys.argv[2:5]
+got = []
+node.create_subscription(PlateMotionStatus, status_topic, got.append, latched)
+node.create_subscription(PlateMotion, active_topic, got.append, latched)
+node.create_subscription(DeviceStatus, device_topic, got.append, 10)
+start = time.monotonic()
+heard = None
+while time.monotonic() - start < 10.0 and (heard is None or time.monotonic() - heard < 0.5):
+    rclpy.spin_once(node, timeout_sec=0.05)
+    if got and heard is None:
+        heard = time.monotonic()   # matched: stay half a second more
+print(len(got))
+"""
+
+
+def test_tools_that_subscribe_mid_goal_do_not_stop_the_plate(tmp_path):
+    """Foxglove, `ppod view` or a script subscribing to the generator's topics while a goal plays: each
+    new reader made a publish hold the generator's GIL for about 330 ms (Fast DDS matching it), which
+    stopped its heartbeat thread and tripped the device's watchdog (CHANGELOG, twenty-sixth session).
+    The heartbeats now come from a keeper process (docs/device.md). 24 tool processes join in waves
+    of three; the plate keeps its goal throughout."""
+    import subprocess
+    import sys
+
+    from ppod_msgs.msg import PlateMotionStatus
+
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.session import RosSession
+
+    names = ["/" + t for t in (topics.MOTION_STATUS, topics.ACTIVE_MOTION, topics.DEVICE_STATUS)]
+    with running_stack(tmp_path, [node(SIM, mismatch="zero"), GENERATOR]), RosSession("system_test") as ros:
+        status = _collect(ros, PlateMotionStatus, topics.MOTION_STATUS, qos.LATCHED)
+        _matched(ros, status)
+        _send_goal(ros)
+        assert ros.wait_until(lambda: any(s.state == PlateMotionStatus.STATE_ACTIVE for s in status), 15), \
+            _device_story(tmp_path)
+        active_at = len(status)
+        heard = []
+        for wave in range(8):
+            joiners = [subprocess.Popen([sys.executable, "-c", _JOINER, f"{wave}_{i}", *names], stdout=subprocess.PIPE,
+                                        stderr=subprocess.STDOUT, text=True) for i in range(3)]
+            for j in joiners:
+                out, _ = j.communicate(timeout=60)
+                heard.append(out.strip().splitlines()[-1] if out.strip() else out)
+        states = {s.state for s in status[active_at:]}
+        log = log_text(tmp_path)
+    assert states == {PlateMotionStatus.STATE_ACTIVE}, f"{_device_story(tmp_path)}\ngenerator: {_statuses(status)}"
+    assert "-> WATCHDOG" not in log, _device_story(tmp_path)
+    assert all(h.isdigit() and int(h) >= 1 for h in heard), heard   # every tool did get the topics
+    assert ", 0 of them not covered by a keeper" in log_text(tmp_path), _device_story(tmp_path)
+
+
 def test_feedback_brings_the_mismatched_plate_within_one_percent_in_five_iterations(tmp_path):
     from ppod_msgs.msg import PlateAcceleration
 

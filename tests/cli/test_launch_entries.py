@@ -29,10 +29,10 @@ def test_launch_entries_leave_no_placeholder_unfilled(sim, tmp_path):
         by_name = {e.name: e for e in entries}
         assert by_name["sim_device"].parameters["port"] == 54321
         assert by_name["waveform_generator"].parameters["can_channel"] == "ws://127.0.0.1:54321/"
-        # The generator asks for real-time scheduling (its heartbeats), and the simulated device for
-        # a lower one (a device's clock does not wait for the host; nodes/data/ppod_up.yaml).
-        assert by_name["sim_device"].prefix == ""
-        assert by_name["sim_device"].env == {"PPOD_REALTIME_PRIORITY": "5", "OPENBLAS_NUM_THREADS": "1"}
+        # The generator asks for real-time scheduling (its heartbeats); the simulated device yields to
+        # the host's nodes (nodes/data/ppod_up.yaml).
+        assert by_name["sim_device"].prefix == "nice -n 5"
+        assert by_name["sim_device"].env == {}
         assert by_name["waveform_generator"].env == {"PPOD_REALTIME_PRIORITY": "10", "OPENBLAS_NUM_THREADS": "1"}
 
 
@@ -89,8 +89,7 @@ def test_the_launch_file_starts_managed_nodes_with_the_console_scripts(tmp_path,
     assert [type(n).__name__ for n in nodes] == ["Node"] + ["LifecycleNode"] * 4 + ["Node"]
     envs = {n.kwargs["name"]: n.kwargs["additional_env"] for n in nodes}
     assert envs["waveform_generator"] == {"PPOD_REALTIME_PRIORITY": "10", "OPENBLAS_NUM_THREADS": "1"}
-    assert envs["sim_device"] == {"PPOD_REALTIME_PRIORITY": "5", "OPENBLAS_NUM_THREADS": "1"}
-    assert all(env is None for name, env in envs.items() if name not in ("waveform_generator", "sim_device"))
+    assert all(env is None for name, env in envs.items() if name != "waveform_generator")
     for n in nodes:
         assert n.kwargs["executable"].startswith("ppod-")
         params_file = n.kwargs["parameters"][0]

@@ -11,10 +11,10 @@ import yaml
 from ppod_nodes.launch.spec import launch_spec_from_dict
 from ppod_nodes.launch.stack import Stack
 
-# As nodes/data/ppod_up.yaml: the simulated device under SCHED_FIFO 5 where granted (a device's clock does
-# not wait for the host), the generator at 10 (its heartbeats on a loaded machine; a CI run tripped the
-# device's watchdog with 157 ms between two of them).
-SIM = {"name": "sim_device", "module": "ppod_sim.ros_node", "lifecycle": False, "when": "sim", "realtime_priority": 5,
+# As nodes/data/ppod_up.yaml: the simulated device niced (it takes no CPU from the host's nodes; on a
+# machine that cannot run both its clock slows), the generator under SCHED_FIFO 10 where granted (its
+# heartbeats on a loaded machine; a CI run tripped the device's watchdog with 157 ms between two of them).
+SIM = {"name": "sim_device", "module": "ppod_sim.ros_node", "lifecycle": False, "when": "sim", "nice": 5,
        "ready": "CAN bridge on", "params": {"port": "{sim_port}", "camera": False, "mismatch": "default"}}
 GENERATOR = {"name": "waveform_generator", "module": "ppod_nodes.waveform_generator", "realtime_priority": 10,
              "sim_params": {"can_interface": "remote", "can_channel": "ws://127.0.0.1:{sim_port}/",

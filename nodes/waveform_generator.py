@@ -64,7 +64,7 @@ class WaveformGeneratorNode(PpodLifecycleNode):
               "publish while a new reader is matched, does not stop them), 'thread' from the node's own thread, "
               "'auto' a keeper where the bus allows a second process (remote, socketcan)",
               choices=("auto", "process", "thread")),
-        Param("heartbeat_lease_s", 0.5, "the keeper's lease: it stops beating when the node has not renewed it for "
+        Param("heartbeat_lease_s", 1.0, "the keeper's lease: it stops beating when the node has not renewed it for "
               "this long (a frozen node; a dead one stops it at once) (s)", min_value=0.1, max_value=2.0),
         Param("stall_dump", True, "with wall-clock heartbeats: when the heartbeat thread cannot run for two "
               "periods (with a keeper: its lease), write every thread's Python stack to stderr (the node's "

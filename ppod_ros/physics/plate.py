@@ -41,19 +41,22 @@ def motion_table(motion: PlateMotion, prune: bool = True) -> np.ndarray:
         only costs time (used by the benchmark to show what pruning saves).
     """
     rows = []
-    for k, amp, ph in zip(motion.k, motion.amplitude, motion.phase):
-        if prune and not np.any(amp > 0):
-            continue
-        w = motion.omega * float(k)
-        a_s = amp * np.cos(ph)
-        a_c = amp * np.sin(ph)
-        # v = -A/w cos(x + phi) = (A sin phi / w) sin x - (A cos phi / w) cos x
-        v_s = a_c / w
-        v_c = -a_s / w
-        # d = -A/w^2 sin(x + phi)
-        d_s = -a_s / w**2
-        d_c = -a_c / w**2
-        rows.append(np.concatenate([[w], a_s, a_c, v_s, v_c, d_s, d_c, [float(k), motion.omega]]))
+    # A frequency so low that a velocity or displacement overflows (an untrusted file's 1e-160 Hz)
+    # gives inf coefficients, which the solver reports as invalid rows: no warning for it here.
+    with np.errstate(over="ignore"):
+        for k, amp, ph in zip(motion.k, motion.amplitude, motion.phase):
+            if prune and not np.any(amp > 0):
+                continue
+            w = motion.omega * float(k)
+            a_s = amp * np.cos(ph)
+            a_c = amp * np.sin(ph)
+            # v = -A/w cos(x + phi) = (A sin phi / w) sin x - (A cos phi / w) cos x
+            v_s = a_c / w
+            v_c = -a_s / w
+            # d = -A/w^2 sin(x + phi)
+            d_s = -a_s / w**2
+            d_c = -a_c / w**2
+            rows.append(np.concatenate([[w], a_s, a_c, v_s, v_c, d_s, d_c, [float(k), motion.omega]]))
     if not rows:
         return np.zeros((0, TABLE_COLS))
     return np.ascontiguousarray(np.array(rows, dtype=np.float64))

@@ -1,5 +1,7 @@
 """Files are untrusted input: every bad motion, part or device file is a one-line ConfigError."""
 
+import warnings
+
 import pytest
 
 from ppod_ros.config.fields import MAX_YAML_BYTES, parse_yaml_text
@@ -65,6 +67,9 @@ def test_ppod_field_refuses_a_grid_too_large_up_front_and_never_reports_nan_as_v
     tiny = tmp_path / "tiny.yaml"
     tiny.write_text(MOTION.format(a="1").replace("frequency_hz: 30", "frequency_hz: 1e-160"))
     out = tmp_path / "f.json"
-    assert main(["field", str(tiny), "--x", "0", "0.01", "2", "--y", "0", "0", "1", "--json", str(out), "--quiet"]) == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)   # the overflow is reported as invalid rows, not warned
+        assert main(["field", str(tiny), "--x", "0", "0.01", "2", "--y", "0", "0", "1", "--json", str(out),
+                     "--quiet"]) == 0
     data = json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(f"invalid JSON constant {c}"))
     assert not any(data["valid"]) and all(v is None for v in data["velocity"])

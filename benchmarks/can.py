@@ -608,6 +608,11 @@ def hold_the_gil(seconds: float) -> None:
     libc.usleep(int(seconds * 1e6))
 
 
+#: The keeper's lease in the stalls section: shorter than the generator's default (1 s), so a stall
+#: the keeper covers here it covers there.
+STALL_LEASE_S = 0.5
+
+
 def bench_stalls(args) -> list[dict]:
     """Heartbeat intervals at the device while the host's GIL is held (see the module docstring)."""
     from ppod_bench.solver_stalls import busy_core
@@ -631,7 +636,8 @@ def bench_stalls(args) -> list[dict]:
     rows = []
     for arm, (t0, t1) in windows.items():
         iv = 1e3 * np.diff(beats[(beats >= t0) & (beats <= t1)])
-        rows.append({"heartbeats_from": "the node's thread" if arm == "thread" else "keeper process (lease 0.5 s)",
+        source = "the node's thread" if arm == "thread" else f"keeper process (lease {STALL_LEASE_S:g} s)"
+        rows.append({"heartbeats_from": source,
                      "stalls": stalls, "stall_ms": 1e3 * hold, "busy_processes": busy, "n": int(iv.size),
                      "median_ms": float(np.median(iv)), "max_ms": float(iv.max()),
                      "over_150_ms": int(np.sum(iv > 150.0)), "keeper": summaries[arm]})
@@ -645,7 +651,7 @@ def _stall_arms(recorder: HeartbeatRecorder, config, stalls: int, hold: float, w
     config = config.with_can(interface="remote", channel=recorder.url)
     bus = open_bus(config.can)
     try:
-        for arm, lease in (("thread", None), ("keeper", 0.5)):
+        for arm, lease in (("thread", None), ("keeper", STALL_LEASE_S)):
             link = DeviceLink(bus, config)
             link.start_heartbeat(keeper_lease_s=lease)
             deadline = time.monotonic() + 30.0

@@ -127,15 +127,15 @@ class WaveformGeneratorNode(PpodLifecycleNode):
         else:
             # Its own thread: a busy executor (or a slow callback) cannot starve the device watchdog;
             # with a keeper process, neither can anything that holds this process's GIL for less
-            # than the lease (ppod_ros/can/keeper.py).
+            # than the lease (ppod_ros/can/keeper.py). The link starts a keeper where the backend lets a
+            # second process open the bus ("auto" and "process"), else beats from the thread.
             keeper = self.params["heartbeat_keeper"]
             interface = self.config.can.interface
             if keeper == "process" and not keeper_supported(interface):
                 self.get_logger().warning(f"heartbeat_keeper 'process': the {interface} backend cannot be opened "
                                           f"by a second process; heartbeats from the node's thread")
-            use = keeper == "process" or (keeper == "auto" and keeper_supported(interface))
             self.link.start_heartbeat(stall_dump=sys.stderr if self.params["stall_dump"] else None,
-                                      keeper_lease_s=self.params["heartbeat_lease_s"] if use else None)
+                                      keeper_lease_s=None if keeper == "thread" else self.params["heartbeat_lease_s"])
         self._subs = [
             self.create_subscription(PlateMotionMsg, topics.GOAL, self._on_goal_msg, qos.COMMANDS),
             self.create_subscription(HarmonicCorrection, topics.CORRECTION, self._on_correction, qos.COMMANDS),

@@ -801,6 +801,18 @@ def ramp_weights(t_s: float, ramp_s: float, midpoint: bool = False) -> tuple[flo
     return w_old, w_mid, t_s - w_old - w_mid
 
 
+@lru_cache(maxsize=16)
+def _frame_weights(horizon_s: float, step_s: float, ramp_s: float, midpoint: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame ``step_s, 2 step_s, ...`` up to ``horizon_s`` after a switch: the :func:`ramp_weights`
+    (T, 3, 1, 1, 1) and the ramp's progress (T, 1, 1, 1), shaped to broadcast over (motions, goals,
+    axes); read-only."""
+    taus = step_s * np.arange(1, int(round(horizon_s / step_s)) + 1)
+    w = np.array([ramp_weights(float(t), ramp_s, midpoint) for t in taus]).reshape(-1, 3, 1, 1, 1)
+    a = (np.minimum(1.0, taus / ramp_s) if ramp_s > 0 else np.ones_like(taus)).reshape(-1, 1, 1, 1)
+    w.flags.writeable = a.flags.writeable = False
+    return w, a
+
+
 def ramped_displacement(v_old: np.ndarray, v_new: np.ndarray, t_s: float, ramp_s: float,
                         v_mid: np.ndarray | None = None) -> np.ndarray:
     """Displacement over ``t_s`` after a switch from v_old to v_new over the generator's ramp of
@@ -1772,35 +1784,32 @@ class MultiTask:
         """Per motion (M,), the cost of stopping on its way (``stop_on_way``; inf where no stop finishes):
         at the first frame within the horizon from which the ramp down would leave every commanded part
         within ``stop_within`` of its tolerances (judged as the stop ahead judges it: the predicted pose
-        plus the velocity then over half the ramp) for ``stop_on_way_frames`` frames in a row, the
-        landing's distance from the goals (angles weighed by ``angle_weight_m_per_rad``), in the units
-        of the horizon's cost. The plate at rest then holds every part."""
+        plus the velocity then over half the ramp) for ``stop_on_way_frames`` frames in a row (the motion
+        playing: ``stop_on_way_playing_frames``), the landing's distance from the goals (angles weighed
+        by ``angle_weight_m_per_rad``), in the units of the horizon's cost. The plate at rest then holds
+        every part."""
         s = self.settings
-        M, G = vel.shape[0], len(self.goals)
+        M = vel.shape[0]
         out = np.full(M, np.inf)
-        cur = np.array([poses[g.index] for g in self.goals])
+        cur = poses[self._goal_rows]
         if not np.all(np.isfinite(cur[:, :2])):
             return out
+        goal, oriented, pos_tol, ang_tol, period = self._goal_arrays
+        turned = oriented & np.isfinite(cur[:, 2])
         v_cur = getattr(self, "_v_current", None)
-        v_cur = np.zeros((G, 3)) if v_cur is None else v_cur
-        scales = self._axis_scales(motions)
-        goal = np.array([[g.x_m, g.y_m, 0.0 if g.theta_rad is None else g.theta_rad] for g in self.goals])
-        turned = np.array([g.theta_rad is not None for g in self.goals]) & np.isfinite(cur[:, 2])
-        pos_tol = s.stop_within * np.array([g.position_tol_m for g in self.goals])
-        ang_tol = s.stop_within * np.array([g.angle_tol_rad for g in self.goals])
-        period = np.array([self.symmetry[g.index] for g in self.goals])
-        taus = s.stop_on_way_step_s * np.arange(1, int(round(s.horizon_s / s.stop_on_way_step_s)) + 1)
-        w = np.array([ramp_weights(float(t), s.ramp_s, mids is not None) for t in taus])   # (T, 3)
-        a = np.minimum(1.0, taus / s.ramp_s) if s.ramp_s > 0 else np.ones_like(taus)
-        disp = v_cur[None, None] * w[:, 0, None, None, None] + vel[None] * w[:, 2, None, None, None]
+        v_cur = np.zeros_like(cur) if v_cur is None else v_cur
+        w, a = _frame_weights(s.horizon_s, s.stop_on_way_step_s, s.ramp_s, mids is not None)
+        disp = v_cur * w[:, 0] + vel * w[:, 2]
         if mids is not None:
-            disp = disp + mids[None] * w[:, 1, None, None, None]
-        v_then = v_cur[None, None] + a[:, None, None, None] * (vel - v_cur[None])[None]
-        land = cur + scales[None] * (disp + v_then * (0.5 * s.ramp_s))              # (T, M, G, 3)
+            disp += mids * w[:, 1]
+        disp += (v_cur + a * (vel - v_cur)) * (0.5 * s.ramp_s)        # the ramp down's carry
+        land = cur + self._axis_scales(motions) * disp                   # (T, M, G, 3)
         d = np.hypot(land[..., 0] - goal[:, 0], land[..., 1] - goal[:, 1])
         ang = np.where(turned, (land[..., 2] - goal[:, 2] + period / 2) % period - period / 2, 0.0)
         ang = np.nan_to_num(ang, nan=np.inf)
-        ok = np.all((d <= pos_tol) & (np.abs(ang) <= ang_tol), axis=2)                 # (T, M)
+        ok = np.all((d <= pos_tol) & (np.abs(ang) <= ang_tol), axis=2)   # (T, M)
+        if not ok.any():
+            return out
         c = np.concatenate([np.zeros((1, M), int), np.cumsum(ok, axis=0)])
         ok = np.zeros_like(ok)
         playing = np.array([m.key == self.current.key for m in motions])
@@ -1813,6 +1822,26 @@ class MultiTask:
             m = np.flatnonzero(hit)
             out[hit] = np.sum(d[j, m] ** 2 + (s.angle_weight_m_per_rad * ang[j, m]) ** 2, axis=1) / s.max_speed_mps ** 2
         return out
+
+    @property
+    def _goal_arrays(self) -> tuple[np.ndarray, ...]:
+        """The goals as arrays (made once per ``stop_within``): poses (G, 3) (angle 0 where none),
+        oriented (G,), the position and angle tolerances times ``stop_within`` (G,), the parts'
+        symmetry periods (G,)."""
+        s = self.settings
+        made = getattr(self, "_goal_arrays_made", None)
+        if made is None or made[0] != s.stop_within:
+            made = self._goal_arrays_made = (s.stop_within, (
+                np.array([[g.x_m, g.y_m, 0.0 if g.theta_rad is None else g.theta_rad] for g in self.goals]),
+                np.array([g.theta_rad is not None for g in self.goals]),
+                s.stop_within * np.array([g.position_tol_m for g in self.goals]),
+                s.stop_within * np.array([g.angle_tol_rad for g in self.goals]),
+                np.array([self.symmetry[g.index] for g in self.goals])))
+        return made[1]
+
+    @property
+    def _goal_rows(self) -> list[int]:
+        return [g.index for g in self.goals]
 
     def _horizon_displacement(self, vel: np.ndarray, mids: np.ndarray | None) -> np.ndarray:
         """Per motion and goal (M, G, 3), the unscaled displacement over the horizon after a switch

@@ -105,6 +105,7 @@ def _bench_scene(seed: int, scene: int):
     return models["bracket"], true, sc, goal
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed, scene, off_s, on_s", [(0, 14, 15.6, 8.8), (2, 11, 18.5, 12.5)])
 def test_benchmark_scenes_endgames(seed, scene, off_s, on_s):
     """One bracket's benchmark scenes (``ppod bench planner --sections multipart --counts 1``), in

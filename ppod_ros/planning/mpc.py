@@ -848,6 +848,13 @@ class MultiTask:
         self.timeout = float(timeout_s)
         self.keep_clear = bool(keep_clear)
         self.symmetry = {g.index: _symmetry(self.parts[g.index]) for g in self.goals}
+        # The goals as arrays (stop_on_way's landing check): poses (G, 3) (angle 0 where none), oriented
+        # (G,), position and angle tolerances (G,), the parts' symmetry periods (G,).
+        self._goal_arrays = (
+            np.array([[g.x_m, g.y_m, 0.0 if g.theta_rad is None else g.theta_rad] for g in self.goals]),
+            np.array([g.theta_rad is not None for g in self.goals]),
+            np.array([g.position_tol_m for g in self.goals]), np.array([g.angle_tol_rad for g in self.goals]),
+            np.array([self.symmetry[g.index] for g in self.goals]))
         n2 = self.settings.two_harmonics_from_parts
         self.harmonics = 2 if n2 and len(self.goals) >= n2 else self.settings.harmonics  # of the search
         self.radius = np.array([part_radius_m(p) for p in self.parts])
@@ -1791,10 +1798,11 @@ class MultiTask:
         s = self.settings
         M = vel.shape[0]
         out = np.full(M, np.inf)
-        cur = poses[self._goal_rows]
+        cur = poses[self._rows[:len(self.goals)]]   # the commanded rows come first
         if not np.all(np.isfinite(cur[:, :2])):
             return out
         goal, oriented, pos_tol, ang_tol, period = self._goal_arrays
+        pos_tol, ang_tol = s.stop_within * pos_tol, s.stop_within * ang_tol
         turned = oriented & np.isfinite(cur[:, 2])
         v_cur = getattr(self, "_v_current", None)
         v_cur = np.zeros_like(cur) if v_cur is None else v_cur
@@ -1805,7 +1813,7 @@ class MultiTask:
         disp += (v_cur + a * (vel - v_cur)) * (0.5 * s.ramp_s)        # the ramp down's carry
         land = cur + self._axis_scales(motions) * disp                   # (T, M, G, 3)
         d = np.hypot(land[..., 0] - goal[:, 0], land[..., 1] - goal[:, 1])
-        ang = np.where(turned, (land[..., 2] - goal[:, 2] + period / 2) % period - period / 2, 0.0)
+        ang = np.where(turned, _wrap(land[..., 2] - goal[:, 2], period), 0.0)
         ang = np.nan_to_num(ang, nan=np.inf)
         ok = np.all((d <= pos_tol) & (np.abs(ang) <= ang_tol), axis=2)   # (T, M)
         if not ok.any():
@@ -1822,26 +1830,6 @@ class MultiTask:
             m = np.flatnonzero(hit)
             out[hit] = np.sum(d[j, m] ** 2 + (s.angle_weight_m_per_rad * ang[j, m]) ** 2, axis=1) / s.max_speed_mps ** 2
         return out
-
-    @property
-    def _goal_arrays(self) -> tuple[np.ndarray, ...]:
-        """The goals as arrays (made once per ``stop_within``): poses (G, 3) (angle 0 where none),
-        oriented (G,), the position and angle tolerances times ``stop_within`` (G,), the parts'
-        symmetry periods (G,)."""
-        s = self.settings
-        made = getattr(self, "_goal_arrays_made", None)
-        if made is None or made[0] != s.stop_within:
-            made = self._goal_arrays_made = (s.stop_within, (
-                np.array([[g.x_m, g.y_m, 0.0 if g.theta_rad is None else g.theta_rad] for g in self.goals]),
-                np.array([g.theta_rad is not None for g in self.goals]),
-                s.stop_within * np.array([g.position_tol_m for g in self.goals]),
-                s.stop_within * np.array([g.angle_tol_rad for g in self.goals]),
-                np.array([self.symmetry[g.index] for g in self.goals])))
-        return made[1]
-
-    @property
-    def _goal_rows(self) -> list[int]:
-        return [g.index for g in self.goals]
 
     def _horizon_displacement(self, vel: np.ndarray, mids: np.ndarray | None) -> np.ndarray:
         """Per motion and goal (M, G, 3), the unscaled displacement over the horizon after a switch

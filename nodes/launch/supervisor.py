@@ -38,10 +38,23 @@ def _die_with_parent() -> None:
     libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
+#: The signals the stop sequence (and the parent's death) sends a child.
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
 def _child_setup(nice: int):
-    """What the child does before exec: die with the parent, lower its priority by ``nice``."""
+    """What the child does before exec: take the stop signals at their defaults, die with the
+    parent, lower its priority by ``nice``.
+
+    A disposition of SIG_IGN and a blocked signal survive exec: a supervisor started as a background
+    job of a non-interactive shell (a script, CI) has SIGINT ignored, and its children would ignore
+    the SIGINT that stops them and wait out the shutdown timeout. Reset, a Python child raises
+    KeyboardInterrupt on it again, and a node's own handlers (rclpy's) are installed as before."""
 
     def setup() -> None:
+        for sig in _STOP_SIGNALS:
+            signal.signal(sig, signal.SIG_DFL)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
         _die_with_parent()
         if nice:
             os.nice(nice)

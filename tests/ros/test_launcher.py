@@ -102,6 +102,47 @@ def test_a_node_started_with_nice_runs_at_that_lower_priority(tmp_path):
         sup.close()
 
 
+@pytest.mark.parametrize("inherited", ["ignored", "blocked"])
+def test_a_child_stops_at_the_first_sigint_whatever_the_launcher_inherited(inherited):
+    """A launcher started as a background job of a non-interactive shell (a script, CI) has SIGINT
+    ignored, and a disposition of SIG_IGN (or a blocked signal) survives fork and exec: its children
+    ignored the SIGINT of the stop sequence and were stopped by SIGTERM after the shutdown timeout
+    (these tests' sleepers took 10 s each to stop in CI). The children start with the stop signals
+    at their defaults."""
+    import io
+    import os
+    import time
+
+    from ppod_nodes.launch.spec import NodeSpec
+    from ppod_nodes.launch.supervisor import Supervisor
+
+    stop = {signal.SIGINT, signal.SIGTERM}
+    if inherited == "ignored":
+        was = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    else:
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, stop)
+    out = io.StringIO()
+    sup = Supervisor(dict(os.environ), sim=True, out=out)
+    try:
+        child = sup.start(NodeSpec("plain", "tests.support.sleeper", lifecycle=False))
+    finally:
+        if inherited == "ignored":
+            signal.signal(signal.SIGINT, was)
+        else:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    try:
+        # Signalled once it runs its module (a SIGINT during the interpreter's start-up can end it
+        # with a fatal error instead of the KeyboardInterrupt this test looks for).
+        deadline = time.monotonic() + 30.0
+        while "[plain] sleeping" not in out.getvalue() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert "[plain] sleeping" in out.getvalue(), out.getvalue()
+        assert sup.stop_all(10)
+        assert child.process.returncode == -signal.SIGINT, out.getvalue()   # not SIGTERM's, after the timeout
+    finally:
+        sup.close()
+
+
 def test_nice_outside_0_to_19_is_one_clear_error(tmp_path):
     from ppod_nodes.launch.spec import launch_spec_from_dict
     from ppod_ros.errors import ConfigError

@@ -1,6 +1,7 @@
 """A bus wrapper that injects faults, for tests: lost, delayed and corrupted frames, bus-off.
 
-``FaultInjectingBus(inner, ...)`` behaves like ``inner`` (any ``can.BusABC``) except that:
+``FaultInjectingBus(inner, ...)`` behaves like ``inner`` (any ``can.BusABC``; shutting the wrapper down
+shuts ``inner`` down) except that:
 
 * each sent and each received frame is lost with probability ``drop``;
 * each surviving frame is corrupted with probability ``corrupt``: a flipped payload bit, a
@@ -161,6 +162,7 @@ class FaultInjectingBus(can.BusABC):
             self._cv.notify_all()
         if self._worker is not None:
             self._worker.join(timeout=1.0)
+        self.inner.shutdown()  # the wrapper owns the bus it wraps, as MeteredBus does
         super().shutdown()
 
 

@@ -111,6 +111,17 @@ def test_bus_off_refuses_sends_until_it_recovers(config, buses):
     assert not bus.is_bus_off
 
 
+def test_shutting_the_wrapper_down_shuts_the_wrapped_bus_down(buses):
+    """The wrapper owns its bus (python-can warned "VirtualBus was not properly shut down" when the
+    safety campaign's wrapped host bus was collected)."""
+    inner = buses()
+    bus = FaultInjectingBus(inner, delay_s=0.01)
+    bus.send(Heartbeat(1).encode(1))
+    bus.shutdown()
+    assert inner._is_shutdown and not bus._worker.is_alive()
+    bus.shutdown()  # twice is harmless
+
+
 def answering(device, stop):
     """Run the simulated device in a thread (real time is irrelevant here) until ``stop`` is set."""
 

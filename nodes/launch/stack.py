@@ -85,12 +85,12 @@ class Stack:
         if not self.nodes:
             raise DeviceError("no nodes selected to start")
         domain = self.env.get("ROS_DOMAIN_ID", "0")
-        other = runfile.read()
-        if other is not None and other.get("pid") != os.getpid() and str(other.get("domain", "0")) == domain:
+        other = runfile.read(domain)
+        if other is not None and other.get("pid") != os.getpid():
             # Two stacks in one domain share node, service and topic names: the lifecycle requests
             # reach the other stack's nodes (measured: "configure failed" as its response timed out).
             raise DeviceError(f"another ppod stack is running in ROS domain {domain} (launcher pid "
-                              f"{other.get('pid')}, {runfile.run_dir() / 'stack.yaml'}): stop it first, or "
+                              f"{other.get('pid')}, {runfile.path(domain)}): stop it first, or "
                               f"start this one with another ROS_DOMAIN_ID")
         mode = "simulated device" if self.sim else "hardware"
         self.supervisor.say(f"starting {len(self.nodes)} nodes against the {mode} "
@@ -178,7 +178,7 @@ class Stack:
             self._lifecycle.close()
             self._lifecycle = None
         clean = self.supervisor.stop_all(self.spec.shutdown_timeout_s)
-        runfile.remove()
+        runfile.remove(self.env.get("ROS_DOMAIN_ID", "0"))
         left = self.supervisor.running()
         self.supervisor.say("all children exited" if not left else
                             "still running: " + ", ".join(c.spec.name for c in left))

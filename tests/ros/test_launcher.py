@@ -208,10 +208,11 @@ def test_a_second_stack_in_the_same_ros_domain_is_refused_before_it_starts_anyth
     monkeypatch.setenv("PPOD_RUN_DIR", str(tmp_path))
     mine = os.environ.get("ROS_DOMAIN_ID", "0")
     launcher = subprocess.Popen([sys.executable, "-m", "tests.support.sleeper"], cwd=ROOT)  # the other stack
+    theirs = mine if domain == "same" else str(int(mine) + 1)
     try:
-        (tmp_path / "stack.yaml").write_text(
-            f"pid: {launcher.pid}\nsim: true\ndomain: '{mine if domain == 'same' else str(int(mine) + 1)}'\n")
-        assert runfile.read() is not None
+        runfile.path(theirs).parent.mkdir(parents=True, exist_ok=True)
+        runfile.path(theirs).write_text(f"pid: {launcher.pid}\nsim: true\ndomain: '{theirs}'\n")
+        assert runfile.read(theirs) is not None and (runfile.read(mine) is not None) == refused
         spec = launch_spec_from_dict({"shutdown_timeout_s": 5, "nodes": [
             {"name": "sleeper", "module": "tests.support.sleeper", "lifecycle": False}]})
         out = io.StringIO()
@@ -228,8 +229,12 @@ def test_a_second_stack_in_the_same_ros_domain_is_refused_before_it_starts_anyth
                 assert [c.spec.name for c in stack.supervisor.children] == ["sleeper"]
                 info = runfile.read()
                 assert info["pid"] == os.getpid() and info["domain"] == mine
+                # The other domain's stack keeps its own file (one run file held both, and the second
+                # stack overwrote the first's: its `ppod estop` then found the second's simulator).
+                assert runfile.read(theirs)["pid"] == launcher.pid
         finally:
             stack.stop()
+        assert runfile.read(theirs)["pid"] == launcher.pid and (runfile.read(mine) is None) != refused
     finally:
         launcher.kill()
         launcher.wait(10)

@@ -2,7 +2,7 @@
 # Set up the PPOD control stack (idempotent) and run a job.
 #
 #   ./run.sh demo [options]    the stack against the simulated device (ppod demo --help)
-#   ./run.sh test [pytest ...] ruff, then the full test suite (both must pass)
+#   ./run.sh test [pytest ...] ruff, then the full test suite, one worker per core (both must pass)
 #   ./run.sh setup             set up only: virtualenv, tested wheels, the ppod_msgs build
 #
 # Set-up creates .venv/ (override with PPOD_VENV), installs the project with the exact dependency
@@ -121,8 +121,13 @@ case "$JOB" in
     cd "$ROOT"
     lint=0
     "$VENV/bin/ruff" check . || { lint=$?; echo "run.sh: ruff check found problems (above)" >&2; }
+    # One pytest worker per core (pytest-xdist; at most 8, each with its own ROS domain), each test
+    # file whole in one worker. PPOD_TEST_WORKERS=0 runs in this process; a -n of your own wins.
+    workers=${PPOD_TEST_WORKERS:-$(nproc 2>/dev/null || echo 1)}
+    [ "$workers" -gt 8 ] && workers=8
+    [ "$workers" -le 1 ] && workers=0
     tests=0
-    "$VENV/bin/python" -m pytest "$@" || tests=$?
+    "$VENV/bin/python" -m pytest -n "$workers" --dist loadfile "$@" || tests=$?
     [ "$tests" -ne 0 ] && exit "$tests"
     exit "$lint" ;;
 esac

@@ -1,7 +1,7 @@
 """Session-wide test settings.
 
-DDS stays on loopback and each test session gets its own ROS_DOMAIN_ID, before anything can call
-rclpy.init() (see docs/ros.md). Matplotlib renders headless.
+DDS stays on loopback and each test session (each pytest-xdist worker of it) gets its own
+ROS_DOMAIN_ID, before anything can call rclpy.init() (see docs/ros.md). Matplotlib renders headless.
 """
 
 import os
@@ -14,8 +14,10 @@ os.environ.pop("ROS_LOCALHOST_ONLY", None)
 os.environ.setdefault("MPLBACKEND", "Agg")
 if "PPOD_TEST_DOMAIN_ID" not in os.environ:
     # Domain ids 1..101 leave room for the ports of several concurrent sessions on one machine.
-    os.environ["PPOD_TEST_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 101))
-os.environ["ROS_DOMAIN_ID"] = os.environ["PPOD_TEST_DOMAIN_ID"]
+    os.environ["PPOD_TEST_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 101 - 16))
+# pytest-xdist's workers inherit the session's id; each takes its own (gw0 the session's, gw1 the next...).
+_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:] or 0)
+os.environ["ROS_DOMAIN_ID"] = str(int(os.environ["PPOD_TEST_DOMAIN_ID"]) + _WORKER)
 
 
 def pytest_addoption(parser):
@@ -80,7 +82,10 @@ def pytest_collection_modifyitems(config, items):
 
 
 def pytest_sessionfinish(session, exitstatus):
-    """Remove shared-memory segments that processes killed by tests (SIGKILL) left behind."""
+    """Remove shared-memory segments that processes killed by tests (SIGKILL) left behind: once, in
+    the controlling process after every worker has finished (not in a worker beside another's DDS)."""
+    if hasattr(session.config, "workerinput"):
+        return
     import shutil
     import subprocess
     import sys

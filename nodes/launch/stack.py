@@ -76,6 +76,11 @@ class Stack:
         self.supervisor.say(f"{signal.Signals(signum).name} received: stopping the stack")
         self.stop_event.set()
 
+    @property
+    def domain(self) -> str:
+        """The ROS domain the stack's nodes run in (its run file is that domain's)."""
+        return self.env.get("ROS_DOMAIN_ID", "0")
+
     # ------------------------------------------------------------------ start
     def start(self, activate: bool = True) -> None:
         """Spawn every node, then configure and activate the lifecycle nodes in order.
@@ -84,7 +89,7 @@ class Stack:
         """
         if not self.nodes:
             raise DeviceError("no nodes selected to start")
-        domain = self.env.get("ROS_DOMAIN_ID", "0")
+        domain = self.domain
         other = runfile.read(domain)
         if other is not None and other.get("pid") != os.getpid():
             # Two stacks in one domain share node, service and topic names: the lifecycle requests
@@ -178,7 +183,7 @@ class Stack:
             self._lifecycle.close()
             self._lifecycle = None
         clean = self.supervisor.stop_all(self.spec.shutdown_timeout_s)
-        runfile.remove(self.env.get("ROS_DOMAIN_ID", "0"))
+        runfile.remove(self.domain)
         left = self.supervisor.running()
         self.supervisor.say("all children exited" if not left else
                             "still running: " + ", ".join(c.spec.name for c in left))

@@ -210,8 +210,7 @@ def test_a_second_stack_in_the_same_ros_domain_is_refused_before_it_starts_anyth
     launcher = subprocess.Popen([sys.executable, "-m", "tests.support.sleeper"], cwd=ROOT)  # the other stack
     theirs = mine if domain == "same" else str(int(mine) + 1)
     try:
-        runfile.path(theirs).parent.mkdir(parents=True, exist_ok=True)
-        runfile.path(theirs).write_text(f"pid: {launcher.pid}\nsim: true\ndomain: '{theirs}'\n")
+        runfile.write({"pid": launcher.pid, "sim": True, "domain": theirs})
         assert runfile.read(theirs) is not None and (runfile.read(mine) is not None) == refused
         spec = launch_spec_from_dict({"shutdown_timeout_s": 5, "nodes": [
             {"name": "sleeper", "module": "tests.support.sleeper", "lifecycle": False}]})

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import errno
 import logging
+import select
 import sys
 import threading
 
@@ -107,6 +108,22 @@ class Bridge:
     @property
     def clients(self) -> int:
         return len(self.server.clients)
+
+    def pending(self) -> bool:
+        """Whether a client's frames wait in its socket, not yet read onto the virtual bus (the
+        reading thread needs the GIL: on a busy machine it can wait its turn for 100 ms)."""
+        socks = []
+        for client in list(self.server.clients):
+            ws = getattr(client, "_ws", None)
+            sock = getattr(ws, "socket", None)
+            if sock is not None and not getattr(ws, "closed", False):
+                socks.append(sock)
+        if not socks:
+            return False
+        try:
+            return bool(select.select(socks, [], [], 0)[0])
+        except (OSError, ValueError):  # a socket closed meanwhile
+            return False
 
     def close(self) -> None:
         self.server.shutdown()

@@ -16,6 +16,16 @@ slips behind the wall clock by that much (counted in :attr:`Pacer.slipped_s`) an
 rate again. Before, any lag over 50 ms was given up (the catch-up then ran as fast as the computer
 allowed, which only a small lag kept inside the watchdog): a demo on an idle machine slipped 0.2 s
 in three stalls of the stack's own bursts, and ran at 0.99x real time instead of 1x.
+
+The catch-up rate holds over the steps together, not step by step: the simulated device's steps are
+uneven (the one that simulates a cycle ahead costs several cheap ones), and a step that overran the
+catch-up line leaves its overrun, up to ``catch_up_credit_s`` (25 ms of wall time), for the steps after
+it to make up. Over any wall interval w device time then runs at most ``catch_up_rate`` x (w + credit);
+the device holds each heartbeat interval to ``catch_up_rate`` x its wall length by passing
+``catch_up=False`` while the last heartbeat's device age is ahead of that (``SimProcess``).
+Applied step by step from each step's end, an expensive step's overrun was lost and the cheap steps
+were held to 1.25x: in ``ppod demo`` the device clock ran at 0.88x of the wall clock with the
+simulator's main thread asleep a third of the time (tests/device/test_sim_clock.py).
 """
 
 from __future__ import annotations
@@ -40,6 +50,11 @@ class Pacer:
         clock slips.
     clock, sleep : callables, optional
         Wall clock and sleep (for tests).
+    catch_up_rate : float
+        Device time per wall time while behind, times the rate (1-2).
+    catch_up_credit_s : float
+        Wall time (0-0.05 s) by which a step that overran the catch-up line may leave the line behind
+        it, for the cheaper steps after it to make up.
     """
 
     def __init__(
@@ -49,6 +64,7 @@ class Pacer:
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
         catch_up_rate: float = 1.25,
+        catch_up_credit_s: float = 0.025,
     ):
         if not (rate > 0):
             raise ConfigError(f"rate: must be > 0 (inf: as fast as possible), got {rate}")
@@ -57,9 +73,13 @@ class Pacer:
         if not (1.0 <= catch_up_rate <= 2.0):
             raise ConfigError(f"catch_up_rate: must be in [1, 2] (device time per wall time while behind, "
                               f"times the rate), got {catch_up_rate}")
+        if not (0.0 <= catch_up_credit_s <= 0.05):
+            raise ConfigError(f"catch_up_credit_s: must be in [0, 0.05] (wall time an overrun step leaves to the "
+                              f"steps after it), got {catch_up_credit_s}")
         self.rate = float(rate)
         self.max_catch_up_s = float(max_catch_up_s)
         self.catch_up_rate = float(catch_up_rate)
+        self.catch_up_credit_s = float(catch_up_credit_s)
         self.clock = clock
         self.sleep = sleep
         self._wall0: float | None = None
@@ -75,9 +95,12 @@ class Pacer:
         self._dev0 = device_time_s
         self._released = (self._wall0, device_time_s)
 
-    def wait(self, device_time_s: float, stop: threading.Event | None = None) -> None:
+    def wait(self, device_time_s: float, stop: threading.Event | None = None, catch_up: bool = True) -> None:
         """Sleep until the wall clock reaches ``device_time_s`` (scaled by the rate); behind it, until
-        device time has run at most ``catch_up_rate`` times the rate since the last release."""
+        device time has run at most ``catch_up_rate`` times the rate since the last release.
+
+        ``catch_up`` False: behind, device time runs at the rate and no faster, without credit (the
+        device's heartbeat is overdue: a catch-up would stretch its age in device time)."""
         if self._wall0 is None:
             self.start(device_time_s)
             return
@@ -94,8 +117,14 @@ class Pacer:
             self.slips += 1
             delay = 0.0
         elif delay < 0:
+            # Behind: hold device time to catch_up_rate x the rate along the line from the last release;
+            # a step past the line keeps it, at most catch_up_credit_s behind now.
             wall, dev = self._released
-            delay = wall + (device_time_s - dev) / (self.rate * self.catch_up_rate) - now
+            due = wall + (device_time_s - dev) / (self.rate * (self.catch_up_rate if catch_up else 1.0))
+            delay = due - now
+            if delay < 0:
+                self._released = (max(due, now - (self.catch_up_credit_s if catch_up else 0.0)), device_time_s)
+                return
         if delay > 0:
             if stop is not None:
                 stop.wait(delay)

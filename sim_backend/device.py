@@ -148,6 +148,9 @@ class SimDevice:
         #: it tells a host that stopped sending from a simulator that stopped reading (see
         #: ``ppod_sim.ros_node``'s WATCHDOG log line).
         self.last_heartbeat_wall_s: float | None = None
+        #: The longest device time between two heartbeats while the watchdog was armed (enabled or
+        #: ramping): the margin the watchdog had, whatever the host or the simulator's pacing did.
+        self.longest_heartbeat_gap_s = 0.0
         self._rx_wall_s: float | None = None
         self.cycle_index = 0
         self.tables = TableReceiver.for_device(config)
@@ -227,6 +230,8 @@ class SimDevice:
         if isinstance(rec, Estop):
             self.emergency_stop()
         elif isinstance(rec, Heartbeat):
+            if self.last_heartbeat_s is not None and self.state in (DeviceState.ENABLED, DeviceState.RAMPING):
+                self.longest_heartbeat_gap_s = max(self.longest_heartbeat_gap_s, now - self.last_heartbeat_s)
             self.last_heartbeat_s = now
             self.last_heartbeat_wall_s = self._rx_wall_s
         elif isinstance(rec, Control):

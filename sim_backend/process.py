@@ -15,6 +15,7 @@ from collections.abc import Callable
 
 import can
 
+from ppod_ros.can.protocol import DeviceState
 from ppod_ros.device.config import DeviceConfig
 from ppod_sim.bridge import Bridge
 from ppod_sim.clock import Pacer
@@ -54,6 +55,9 @@ class SimProcess:
         self.bridge = Bridge(self.channel, port)
         self.pacer = Pacer(rate)
         self.on_step: list[Callable[[SimDevice], None]] = []
+        self.deliver_wait_s = 0.005
+        self.deliver_waits = 0
+        self.deliver_waited_s = 0.0
         self.wall_s = 0.0
 
     @property
@@ -69,11 +73,52 @@ class SimProcess:
         t0 = time.monotonic()
         self.pacer.start(dev.time_s)
         while not stop.is_set() and (end is None or dev.time_s < end - 1e-12):
+            self._deliver()
             dev.step(batch)
             for callback in self.on_step:
                 callback(dev)
-            self.pacer.wait(dev.time_s, stop)
+            self.pacer.wait(dev.time_s, stop, catch_up=self._may_catch_up())
         self.wall_s += time.monotonic() - t0
+
+    def _deliver(self) -> None:
+        """Once a heartbeat is due (the watchdog armed, the last one a heartbeat period old), let the
+        bridge read what the host has sent before the device steps on: a real device has its frames
+        when they are sent. The bridge's reading threads share this process's GIL with the device, the
+        camera and the parts; on a loaded machine a heartbeat waited in the socket up to 120 ms of wall
+        time while the device ran on (its watchdog saw the host's 50 ms heartbeats up to 152 ms
+        apart). At most ``deliver_wait_s`` per step, so a socket that stays readable cannot hold the
+        device (tests/device/test_sim_pacing.py)."""
+        dev = self.device
+        if not self.deliver_wait_s or dev.state not in (DeviceState.ENABLED, DeviceState.RAMPING):
+            return
+        if dev.heartbeat_age_s() < self.config.can.heartbeat_period_s:
+            return  # no heartbeat due yet: the other frames can wait for the reading thread's turn
+        t0 = None
+        while self.bridge.pending():
+            now = time.monotonic()
+            if t0 is None:
+                t0 = now
+            elif now - t0 >= self.deliver_wait_s:
+                break
+            time.sleep(0.0002)  # gives the GIL to the reading thread
+        if t0 is not None:
+            self.deliver_waits += 1
+            self.deliver_waited_s += time.monotonic() - t0
+
+    def _may_catch_up(self) -> bool:
+        """Whether a device behind the wall clock may run faster than the rate now.
+
+        Catching up stretches the host's heartbeat intervals in device time. While the watchdog is
+        armed the last heartbeat's age in device time is held to at most the catch-up rate times its
+        age in wall time since it reached the device's bus (the catch-up's credit would otherwise
+        spend a burst of device time on one interval): an interval of w at the bus is at most
+        ``catch_up_rate`` x w of device time, one step more, whatever the steps' unevenness.
+        """
+        dev = self.device
+        if dev.state not in (DeviceState.ENABLED, DeviceState.RAMPING) or dev.last_heartbeat_wall_s is None:
+            return True
+        wall_age = time.time() - dev.last_heartbeat_wall_s
+        return dev.heartbeat_age_s() <= self.pacer.rate * self.pacer.catch_up_rate * wall_age
 
     def close(self) -> None:
         self.bridge.close()

@@ -215,7 +215,10 @@ class SimDeviceNode(QuietPublishers, Node):
                                f"{w.physics_s:.2f} s; {w.frames_rendered} frames rendered, {w.frames_dropped} dropped; "
                                f"device clock at most {1e3 * w.process.pacer.max_lag_s:.0f} ms behind real time, "
                                f"slipped {w.process.pacer.slipped_s:.2f} s in {w.process.pacer.slips} stalls; "
-                               f"waited {w.backpressure_s:.2f} s for the parts physics")
+                               f"waited {w.backpressure_s:.2f} s for the parts physics; heartbeats at most "
+                               f"{1e3 * w.device.longest_heartbeat_gap_s:.0f} ms of device time apart while enabled; "
+                               f"waited {w.process.deliver_waited_s:.2f} s in {w.process.deliver_waits} steps for "
+                               f"the bridge to read the host's frames")
         self.get_logger().info(f"CPU {time.process_time():.2f} s in all, by thread (live at the end): "
                                + ", ".join(f"{name} {sec:.2f} s" for name, sec in cpu))
 

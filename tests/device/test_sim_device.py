@@ -188,6 +188,26 @@ def test_the_watchdog_log_sets_the_heartbeats_arrival_at_the_bridge_beside_the_d
     assert "no heartbeat ever reached the bridge" in watchdog_story(fresh.device, 0.0, time.time())
 
 
+def test_the_device_keeps_its_longest_heartbeat_gap_while_the_watchdog_is_armed(rig):
+    """The simulator's log reports it: the watchdog's margin, whatever the pacing of its clock did."""
+    r = rig()
+    assert r.device.longest_heartbeat_gap_s == 0.0
+    r.link.heartbeat()
+    r.device.advance(0.4)  # disabled: no watchdog, no gap counted
+    r.link.heartbeat()
+    r.device.step()
+    assert r.device.longest_heartbeat_gap_s == 0.0
+    r.start()  # heartbeats every 50 ms of device time
+    period = r.config.can.heartbeat_period_s
+    assert period <= r.device.longest_heartbeat_gap_s <= period + r.config.timing.watchdog_check_s + 1e-9
+    r.link.heartbeat()
+    r.device.advance(0.12)  # a gap inside the watchdog's 150 ms
+    r.link.heartbeat()
+    r.device.step()
+    assert 0.12 <= r.device.longest_heartbeat_gap_s <= 0.12 + 2 * r.config.timing.watchdog_check_s + 1e-9
+    assert r.device.state == DeviceState.ENABLED
+
+
 def test_without_heartbeats_the_plate_is_at_zero_within_300_ms_of_the_last_one(rig):
     r = rig()
     r.start()

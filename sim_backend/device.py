@@ -230,7 +230,7 @@ class SimDevice:
         if isinstance(rec, Estop):
             self.emergency_stop()
         elif isinstance(rec, Heartbeat):
-            if self.last_heartbeat_s is not None and self.state in (DeviceState.ENABLED, DeviceState.RAMPING):
+            if self.last_heartbeat_s is not None and self.watchdog_armed:
                 self.longest_heartbeat_gap_s = max(self.longest_heartbeat_gap_s, now - self.last_heartbeat_s)
             self.last_heartbeat_s = now
             self.last_heartbeat_wall_s = self._rx_wall_s
@@ -312,10 +312,9 @@ class SimDevice:
         self._disabling = False
 
     def _check_watchdog(self) -> None:
-        if self.state not in (DeviceState.ENABLED, DeviceState.RAMPING):
+        if not self.watchdog_armed:
             return
-        age = math.inf if self.last_heartbeat_s is None else self.time_s - self.last_heartbeat_s
-        if age > self.config.timing.watchdog_timeout_s:
+        if self.heartbeat_age_s() > self.config.timing.watchdog_timeout_s:
             self.state = DeviceState.WATCHDOG
             self.faults |= Fault.WATCHDOG
             self._disabling = False
@@ -339,6 +338,11 @@ class SimDevice:
             if self.state != DeviceState.FAULT:
                 self.player.stop(self.config.timing.watchdog_ramp_s, at_s)
             self.state = DeviceState.FAULT
+
+    @property
+    def watchdog_armed(self) -> bool:
+        """The watchdog acts in these states only (enabled, or ramping to a goal or to zero)."""
+        return self.state in (DeviceState.ENABLED, DeviceState.RAMPING)
 
     def heartbeat_age_s(self) -> float:
         return math.inf if self.last_heartbeat_s is None else self.time_s - self.last_heartbeat_s
@@ -425,7 +429,7 @@ class SimDevice:
         """Simulate from the current period to the cycle end, or to the watchdog's deadline."""
         n0 = self.step_in_cycle
         chunks = (self.steps_per_cycle - n0) // self.steps_per_chunk
-        if self.state in (DeviceState.ENABLED, DeviceState.RAMPING):
+        if self.watchdog_armed:
             # End at the first period boundary where the heartbeat would be too old.
             age = self.heartbeat_age_s()
             j = math.floor((self.config.timing.watchdog_timeout_s - age) / self.chunk_s) + 1

@@ -15,7 +15,6 @@ from collections.abc import Callable
 
 import can
 
-from ppod_ros.can.protocol import DeviceState
 from ppod_ros.device.config import DeviceConfig
 from ppod_sim.bridge import Bridge
 from ppod_sim.clock import Pacer
@@ -89,21 +88,17 @@ class SimProcess:
         apart). At most ``deliver_wait_s`` per step, so a socket that stays readable cannot hold the
         device (tests/device/test_sim_pacing.py)."""
         dev = self.device
-        if not self.deliver_wait_s or dev.state not in (DeviceState.ENABLED, DeviceState.RAMPING):
+        if not (self.deliver_wait_s and dev.watchdog_armed):
             return
         if dev.heartbeat_age_s() < self.config.can.heartbeat_period_s:
             return  # no heartbeat due yet: the other frames can wait for the reading thread's turn
-        t0 = None
-        while self.bridge.pending():
-            now = time.monotonic()
-            if t0 is None:
-                t0 = now
-            elif now - t0 >= self.deliver_wait_s:
-                break
+        if not self.bridge.pending():
+            return
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < self.deliver_wait_s and self.bridge.pending():
             time.sleep(0.0002)  # gives the GIL to the reading thread
-        if t0 is not None:
-            self.deliver_waits += 1
-            self.deliver_waited_s += time.monotonic() - t0
+        self.deliver_waits += 1
+        self.deliver_waited_s += time.monotonic() - t0
 
     def _may_catch_up(self) -> bool:
         """Whether a device behind the wall clock may run faster than the rate now.
@@ -115,7 +110,7 @@ class SimProcess:
         ``catch_up_rate`` x w of device time, one step more, whatever the steps' unevenness.
         """
         dev = self.device
-        if dev.state not in (DeviceState.ENABLED, DeviceState.RAMPING) or dev.last_heartbeat_wall_s is None:
+        if not dev.watchdog_armed or dev.last_heartbeat_wall_s is None:
             return True
         wall_age = time.time() - dev.last_heartbeat_wall_s
         return dev.heartbeat_age_s() <= self.pacer.rate * self.pacer.catch_up_rate * wall_age

@@ -338,3 +338,44 @@ def test_parts_close_but_apart_are_still_measured():
     for truth in (washer, hexa):
         p = nearest(result, truth)
         assert math.hypot(p.x_m - truth[0], p.y_m - truth[1]) < 3e-4
+
+
+@pytest.mark.parametrize("seed", [0, 1, 4, 7])
+def test_the_stacks_half_resolution_camera_calibrates_from_its_markers_to_a_tenth_of_a_millimetre(seed):
+    # Regression (the demo ended "done" with a washer 1.88 mm from its goal by the tracker and 2.06 mm
+    # by ground truth, tolerance 2 mm): on the stack's 640 x 512 camera the marker corners' sub-pixel
+    # window was cut to a fraction of a bit cell, and the calibration from the first frame and the
+    # plate's shift in every frame after it were off by up to 0.3 mm, the same for every part.
+    # The tracker as the node runs it: calibrated from the markers of its first frame, following
+    # the plate. Parts at rest and on the vibrating plate, against ground truth.
+    from importlib import resources
+
+    from ppod_ros.vision import CameraConfig
+
+    cam = CameraConfig.from_yaml(resources.files("ppod_ros") / "data" / "camera_640.yaml")
+    specs, settings = load_tracker_config(resources.files("ppod_ros") / "data" / "tracker.yaml")
+    by_label = {s.label: s for s in specs}
+    rng = np.random.default_rng(seed)
+    placed = [(by_label[label], (x + rng.uniform(-0.004, 0.004), y + rng.uniform(-0.004, 0.004),
+                                 rng.uniform(-math.pi, math.pi)))
+              for label, x, y in (("washer", -0.03, 0.02), ("washer", 0.03, 0.03), ("hex", -0.01, -0.04),
+                                  ("tile", 0.04, -0.03))]
+    renderer = CameraRenderer(cam, seed=seed)
+    tracker = PartTracker(cam, specs, settings)
+    worst_rest, worst_moving = 0.0, 0.0
+    for i in range(16):
+        moving = i >= 8   # the plate caught at one displacement of a motion, as a phase-locked camera sees it
+        disp = np.array([3e-4, -2e-4, 1e-4, 2e-3, -1e-3, math.radians(0.15)]) if moving else None
+        result = tracker.update(render(renderer, placed, 0.1 * i, plate_displacement=disp).image, 0.1 * i)
+        if i in (0, 8):
+            continue   # a new track's first report, and the first frame after the plate moved
+        for _, pose in placed:
+            report = nearest(result, pose)
+            assert report.status == TrackStatus.TRACKED
+            error = math.hypot(report.x_m - pose[0], report.y_m - pose[1])
+            if moving:
+                worst_moving = max(worst_moving, error)
+            else:
+                worst_rest = max(worst_rest, error)
+    assert worst_rest < 1.2e-4, f"at rest: {1e3 * worst_rest:.3f} mm"
+    assert worst_moving < 2.5e-4, f"plate vibrating: {1e3 * worst_moving:.3f} mm"

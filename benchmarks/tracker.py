@@ -2,9 +2,9 @@
 
 For 1, 5, 10 and 20 parts (washers, pins, square tiles, trapezoid tabs, hexagons) moving smoothly,
 turning, and pairs approaching each other to about a millimetre, the simulated camera renders a
-1280 x 1024 sequence at 10 fps (triggered at the plate's cycle start, the plate vibrating), and
-the tracker (calibrated from the plate's markers on the first frame, starting from a nominal
-camera mount) tracks it. Printed per sequence:
+1280 x 1024 sequence (or one of the camera file of --camera) at 10 fps (triggered at the plate's
+cycle start, the plate vibrating), and the tracker (calibrated from the plate's markers on the
+first frame, starting from a nominal camera mount) tracks it. Printed per sequence:
 
   tracked %      part-frames reported TRACKED (the rest: PREDICTED with a reason, e.g. touching)
   pos RMS/max    position error of TRACKED reports (mm)
@@ -22,6 +22,7 @@ examples:
   ppod bench tracker
   ppod bench tracker --parts 1 5 --frames 50
   ppod bench tracker --quick --out out/bench
+  ppod bench tracker --camera ppod_ros/data/camera_640.yaml --parts 1 5   # the stack's 640 x 512 camera
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-HELP = "part tracker: pose accuracy, id swaps and ms per 1280x1024 frame on rendered sequences"
+HELP = "part tracker: pose accuracy, id swaps and ms per frame on rendered sequences"
 
 TARGETS = {"pos_rms_mm": 0.2, "theta_rms_deg": 0.3, "ms_per_frame": 10.0, "id_swaps": 0}
 
@@ -51,6 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=1, help="scene and noise seed (default: %(default)s)")
     parser.add_argument("--quick", action="store_true", help="30 frames per sequence")
     parser.add_argument("--all-cores", action="store_true", help="do not restrict timing to one core")
+    parser.add_argument("--camera", metavar="FILE", default=None,
+                        help="camera file to render and track with (default: the 1280 x 1024 default camera)")
 
 
 @dataclass
@@ -100,8 +103,9 @@ class SequenceScore:
         }
 
 
-def run_sequence(n_parts: int, frames: int, seed: int) -> SequenceScore:
-    """Render and track one sequence; returns its score."""
+def run_sequence(n_parts: int, frames: int, seed: int, camera=None) -> SequenceScore:
+    """Render and track one sequence (``camera``: a CameraConfig, default ``CameraConfig()``); returns
+    its score."""
     import cv2
     from scipy.optimize import linear_sum_assignment
 
@@ -111,7 +115,7 @@ def run_sequence(n_parts: int, frames: int, seed: int) -> SequenceScore:
     from ppod_sim.camera.scenarios import make_scene
 
     cv2.setNumThreads(1)
-    true_camera = CameraConfig()
+    true_camera = camera if camera is not None else CameraConfig()
     # The tracker starts from the nominal mount (straight down, centred) and calibrates from markers.
     nominal = true_camera.with_changes(position_m=(0.0, 0.0, 0.70), rotation_deg=(0.0, 0.0, 0.0))
     scene = make_scene(n_parts, seed=seed)
@@ -168,19 +172,22 @@ def _pin_to_one_core() -> set[int] | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ppod_ros.vision import CameraConfig
+
     frames = 30 if args.quick else args.frames
+    camera = CameraConfig.from_yaml(args.camera) if args.camera else CameraConfig()
     restore = None if args.all_cores else _pin_to_one_core()
     try:
         rows = []
         for n in args.parts:
             t0 = time.perf_counter()
-            row = run_sequence(n, frames, args.seed).row()
+            row = run_sequence(n, frames, args.seed, camera).row()
             row["wall_s"] = time.perf_counter() - t0
             rows.append(row)
     finally:
         if restore is not None:
             os.sched_setaffinity(0, restore)
-    _print_table(rows, one_core=restore is not None)
+    _print_table(rows, one_core=restore is not None, size=(camera.width, camera.height))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "tracker.json").write_text(json.dumps({"targets": TARGETS, "rows": rows}, indent=2))
@@ -189,9 +196,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_table(rows: list[dict], one_core: bool) -> None:
+def _print_table(rows: list[dict], one_core: bool, size: tuple[int, int] = (1280, 1024)) -> None:
     cores = "one core" if one_core else "all cores"
-    print(f"Part tracker on rendered 1280x1024 sequences (10 fps, {cores}; cv2 threads = 1)")
+    print(f"Part tracker on rendered {size[0]}x{size[1]} sequences (10 fps, {cores}; cv2 threads = 1)")
     cols = [
         ("parts", 5, "d", "parts"),
         ("frames", 6, "d", "frames"),
@@ -252,7 +259,7 @@ def _plot(rows: list[dict], path: Path) -> None:
     ax.bar(x - 0.2, [r["ms_median"] for r in rows], 0.4, label="wall, median")
     ax.bar(x + 0.2, [r["cpu_ms_median"] for r in rows], 0.4, label="CPU, median")
     ax.axhline(TARGETS["ms_per_frame"], color="k", ls="--", lw=1, label="target")
-    ax.set(title="tracker ms per 1280x1024 frame", xticks=x, xticklabels=n, xlabel="parts")
+    ax.set(title="tracker ms per frame", xticks=x, xticklabels=n, xlabel="parts")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

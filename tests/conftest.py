@@ -2,12 +2,19 @@
 
 DDS stays on loopback and each test session (each pytest-xdist worker of it) gets its own
 ROS_DOMAIN_ID, before anything can call rclpy.init() (see docs/ros.md). Matplotlib renders headless.
+OpenBLAS and numpy are pinned to their AVX2 kernels before numpy is imported (the stack's own
+setting, ``ppod_nodes.numeric_env``): the tests' expected closed-loop outcomes must not depend on
+the machine's CPU.
 """
 
 import os
 import random
 
-import pytest
+from ppod_nodes.numeric_env import configure_numeric_environment
+
+configure_numeric_environment()
+
+import pytest  # noqa: E402
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_LOCALHOST_ONLY", None)

@@ -4,7 +4,7 @@ OpenBLAS and numpy choose their kernels by the CPU they run on (OpenBLAS's ``DYN
 SIMD dispatch), and kernels for different instruction sets round differently in the last bits. The
 planner's designs are nonlinear fits with several local optima, and its closed loop amplifies
 last-bit differences: on an AVX-512 machine the centre designs of the rotation and the line sink
-came out as other motions (the line sink's y-acceleration 25.6 against 14.9 m/s^2), and benchmark
+came out as other motions (the line sink's y-acceleration 25.6 against 21.5 m/s^2), and benchmark
 scenes took 12.8 and 21.2 s instead of 8.8 and 12.5 s. A lab's regression replay, a benchmark
 figure or a test's expected outcome must not depend on which PC runs it.
 

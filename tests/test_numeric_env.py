@@ -81,11 +81,12 @@ def test_this_test_process_and_the_stacks_processes_run_the_pinned_kernels():
 
 @x86_avx2
 def test_the_line_sinks_centre_design_is_the_one_the_planner_was_tuned_with():
-    # The design the suite's closed-loop tests hold; on an AVX-512 machine's own kernels it was another
-    # local optimum (|a_y| 25.6 against 14.9 m/s^2, |alpha_x| 28.0 against 44.7 rad/s^2).
+    # The design the suite's closed-loop tests and the benchmark's recorded outcomes hold; on an
+    # AVX-512 machine's own kernels it was another local optimum (|a_y| 25.6 against 21.5 m/s^2), and
+    # with only one of the two pins others again (19.9 and 14.9 m/s^2).
     from ppod_ros.device import default_device_config
     from ppod_ros.planning.mpc import base_design
 
     amplitude = base_design("line_sink", default_device_config()).amplitude[0]
-    assert amplitude[1] == pytest.approx(14.91, abs=0.05) and amplitude[3] == pytest.approx(44.72, abs=0.05)
+    assert amplitude[1] == pytest.approx(21.55, abs=0.05) and amplitude[3] == pytest.approx(27.94, abs=0.05)
     assert np.all(np.isfinite(amplitude))

@@ -35,12 +35,18 @@ def test_echo_prints_one_message_of_every_ppod_msgs_type(ros):
     procs = {name: subprocess.Popen(_ppod("echo", topic, "--once", "--timeout", "60", "--discovery-wait", "60"),
                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for name, topic in topics.items()}
-    for name, proc in procs.items():
-        out, err = proc.communicate(timeout=120)
-        assert proc.returncode == 0, f"{name}: {err}"
-        document = yaml.safe_load(out.split("---\n")[0])
-        cls = dict(types)[name]
-        assert set(document) == set(cls.get_fields_and_field_types()), name
+    try:
+        for name, proc in procs.items():
+            out, err = proc.communicate(timeout=120)
+            assert proc.returncode == 0, f"{name}: {err}"
+            document = yaml.safe_load(out.split("---\n")[0])
+            cls = dict(types)[name]
+            assert set(document) == set(cls.get_fields_and_field_types()), name
+    finally:   # no echo process outlives the test (a ROS process can hang in its DDS teardown)
+        for proc in procs.values():
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
 
 
 def test_echo_exits_non_zero_when_printing_a_message_fails(ros):

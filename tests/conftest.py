@@ -10,11 +10,9 @@ the machine's CPU.
 import os
 import random
 
-from ppod_nodes.numeric_env import configure_numeric_environment
+import pytest
 
-configure_numeric_environment()
-
-import pytest  # noqa: E402
+import ppod_nodes  # noqa: F401  (importing it pins the numerics: ppod_nodes.numeric_env)
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_LOCALHOST_ONLY", None)

@@ -8,7 +8,6 @@ on the machines of earlier sessions. With the pins they pass there too.
 
 import ctypes
 import os
-import platform
 import subprocess
 import sys
 
@@ -55,8 +54,9 @@ def _openblas_core() -> str | None:
     return None
 
 
-x86_avx2 = pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64")
-                              or not {"avx2", "fma"} <= _cpu_flags(), reason="an x86-64 CPU with AVX2 and FMA")
+# Where the stack pins OpenBLAS (an x86-64 CPU with AVX2 and FMA), by the one rule that decides it.
+x86_avx2 = pytest.mark.skipif("OPENBLAS_CORETYPE" not in configure_numeric_environment({}),
+                              reason="an x86-64 CPU with AVX2 and FMA")
 
 
 @x86_avx2

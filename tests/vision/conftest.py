@@ -33,6 +33,19 @@ def calibration(camera) -> PlateCalibration:
     return cal
 
 
+@pytest.fixture(scope="session")
+def stack_camera_path() -> str:
+    """The stack's own camera file (640 x 512), as ``ppod up`` gives the simulator and the tracker."""
+    from importlib import resources
+
+    return str(resources.files("ppod_ros") / "data" / "camera_640.yaml")
+
+
+@pytest.fixture(scope="session")
+def stack_camera(stack_camera_path) -> CameraConfig:
+    return CameraConfig.from_yaml(stack_camera_path)
+
+
 @pytest.fixture
 def renderer(camera) -> CameraRenderer:
     return CameraRenderer(camera, seed=7)

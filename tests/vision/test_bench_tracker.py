@@ -24,13 +24,11 @@ def test_benchmark_scenes_never_let_parts_overlap():
         assert min(scene.min_clearance_m(0.05 * k) for k in range(200)) >= 0.001 - 1e-9
 
 
-def test_the_benchmark_renders_and_tracks_with_a_camera_file(tmp_path, capsys):
+def test_the_benchmark_renders_and_tracks_with_a_camera_file(tmp_path, capsys, stack_camera_path):
     # --camera: the stack's own 640 x 512 camera (where the plate calibration's corner window once
     # cost 0.14-0.20 mm of position RMS).
-    from importlib import resources
-
-    path = str(resources.files("ppod_ros") / "data" / "camera_640.yaml")
-    args = argparse.Namespace(parts=[1], frames=6, seed=3, quick=False, all_cores=True, out=str(tmp_path), camera=path)
+    args = argparse.Namespace(parts=[1], frames=6, seed=3, quick=False, all_cores=True, out=str(tmp_path),
+                              camera=stack_camera_path)
     assert bench.run(args) == 0
     assert "rendered 640x512 sequences" in capsys.readouterr().out
     row = json.loads((tmp_path / "tracker.json").read_text())["rows"][0]

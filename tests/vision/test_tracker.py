@@ -315,17 +315,15 @@ HEX = PartSpec("hex", Footprint.from_value({"polygon": [[0.008, 0.0], [0.004, 0.
                0.003)
 
 
-def test_parts_close_but_apart_are_still_measured():
+def test_parts_close_but_apart_are_still_measured(stack_camera):
     # Regression (the demo, 2 of 3 runs failed): a washer at its goal and a hex that came to rest
     # 16-18 mm from it (a gap of 2-4 mm) were both reported "touching" and lost for good, because a
     # blob near another one was never measured; the planner then gave up on the washer. A crowded
     # blob whose fit is clean is a measurement (on the stack's 640 x 512 camera, within 0.3 mm: the
     # pixels within reach of both blobs count for neither, which biases it by a fraction of a pixel).
-    import importlib.resources as resources
+    from ppod_ros.vision import PlateCalibration
 
-    from ppod_ros.vision import CameraConfig, PlateCalibration
-
-    cam = CameraConfig.from_yaml(str(resources.files("ppod_ros") / "data" / "camera_640.yaml"))  # the stack's
+    cam = stack_camera
     cal = PlateCalibration.nominal(cam)
     tracker = PartTracker(cam, [WASHER, HEX], calibration=cal)
     ren = CameraRenderer(cam, seed=7)
@@ -341,7 +339,7 @@ def test_parts_close_but_apart_are_still_measured():
 
 
 @pytest.mark.parametrize("seed", [0, 1, 4, 7])
-def test_the_stacks_half_resolution_camera_calibrates_from_its_markers_to_a_tenth_of_a_millimetre(seed):
+def test_the_stacks_half_resolution_camera_calibrates_from_its_markers_to_a_tenth_of_a_millimetre(seed, stack_camera):
     # Regression (the demo ended "done" with a washer 1.88 mm from its goal by the tracker and 2.06 mm
     # by ground truth, tolerance 2 mm): on the stack's 640 x 512 camera the marker corners' sub-pixel
     # window was cut to a fraction of a bit cell, and the calibration from the first frame and the
@@ -350,9 +348,7 @@ def test_the_stacks_half_resolution_camera_calibrates_from_its_markers_to_a_tent
     # the plate. Parts at rest and on the vibrating plate, against ground truth.
     from importlib import resources
 
-    from ppod_ros.vision import CameraConfig
-
-    cam = CameraConfig.from_yaml(resources.files("ppod_ros") / "data" / "camera_640.yaml")
+    cam = stack_camera
     specs, settings = load_tracker_config(resources.files("ppod_ros") / "data" / "tracker.yaml")
     by_label = {s.label: s for s in specs}
     rng = np.random.default_rng(seed)

@@ -116,6 +116,12 @@ class MpcSettings:
                                           # seeds 0 and 1, side by side: four parts 23/40 against 22/40, three
                                           # 37/40 against 38/40, searched steps' CPU median 4-10 % lower
     fd_step: float = 0.03                 # finite-difference step, relative to the axis scales
+    local_probes: bool = True             # a point part's Jacobian columns along the plate's rotation inputs
+                                          # from its translation probes (the chain rule: a point part feels the
+                                          # plate only at its own point, a = p'' + alpha x r): 13 of 25 probe
+                                          # motions solved per point part over two harmonics. Four parts'
+                                          # searched steps 11 % less CPU, outcomes within the noise
+                                          # (docs/planner.md, "Local probes")
     max_change: float = 0.6               # trust region per step, relative to the axis scales
     min_amplitude: float = 0.8            # searched motions keep at least this fraction of the template
                                           # sink's amplitude (relative to the axis scales): weak motions
@@ -370,6 +376,8 @@ class MpcSettings:
         v = self.latency_smoothing
         if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1):
             raise ConfigError(f"latency_smoothing: expected a weight 0..1, got {v!r}")
+        if not isinstance(self.local_probes, bool):
+            raise ConfigError(f"local_probes: expected true or false, got {self.local_probes!r}")
         if self.line_search not in ("best", "first"):
             raise ConfigError(f"line_search: expected 'best' or 'first', got {self.line_search!r}")
         if self.harmonics not in (1, 2):
@@ -890,6 +898,7 @@ class MultiTask:
         for j, row in enumerate(self._rows):
             groups.setdefault(tuple(self.parts[row].key), []).append(j)
         self._groups = [(self.parts[self._rows[js[0]]], js) for js in groups.values()]
+        self._point_groups = any(isinstance(part, PointPart) for part, _ in self._groups)
         self._memo: dict[bytes, tuple[np.ndarray, bool, bool, bool]] = {}  # key: (velocities, valid, budgeted,
                                                                            # invalid only as the solver gave up)
         self._held: tuple[bytes, np.ndarray, np.ndarray] | None = None  # the motion playing: (key, poses of
@@ -1847,9 +1856,15 @@ class MultiTask:
         """Residuals (M, R), model velocities (M, G, 3) and validity (M,) of ``motions``: the
         predicted poses over the horizon against the waypoints, and the collisions; ``mids``
         (M, G, 3): the velocities half-way through each motion's ramp (:meth:`_middles`)."""
+        vel_all, ok = self._velocities(motions, poses, budget)
+        return self._residuals_of(motions, vel_all, ok, poses, statuses, mids)
+
+    def _residuals_of(self, motions, vel_all: np.ndarray, ok: np.ndarray, poses, statuses,
+                      mids: np.ndarray | None = None):
+        """:meth:`_residuals` from the solved rows' model velocities ``vel_all`` (M, R, 3) and
+        validity ``ok`` (M,)."""
         s, H = self.settings, self.settings.horizon_s
         M, G = len(motions), len(self.goals)
-        vel_all, ok = self._velocities(motions, poses, budget)
         vel = vel_all[:, :G]
         scales = self._axis_scales(motions)
         way, weight = self._waypoints(poses, statuses)
@@ -1921,10 +1936,7 @@ class MultiTask:
         lost_new = np.zeros(len(todo), bool)   # some commanded row invalid for another reason than giving up
         rows_gave_up = np.zeros((len(todo), G), bool)
         for part, js in self._groups:
-            dim = _dim(part)
-            cfg = np.array([poses[rows[j], :dim] for j in js])
-            seen = np.all(np.isfinite(cfg[:, :2]), axis=1)
-            cfg[~seen] = 0.0
+            dim, cfg, seen = self._group_configs(part, js, poses)
             v, valid, gave_up = predict_velocities(todo, part, cfg, settings, gave_up=True)
             v[:, ~seen] = 0.0
             v_new[:, js, :dim] = v
@@ -1936,6 +1948,63 @@ class MultiTask:
         for motion, v, o, lost, given_up in zip(todo, v_new, ok_new, lost_new, rows_gave_up):
             self._memo[motion.key] = (v, bool(o), settings is not None, not o and not lost)
             self._rows_gave_up[motion.key] = given_up
+
+    def _group_configs(self, part, js: list[int], poses: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+        """A part model's solved rows ``js``: its dimension, their configurations (N, dim) (unseen
+        rows at the origin) and which are seen (N,)."""
+        dim = _dim(part)
+        cfg = np.array([poses[self._rows[j], :dim] for j in js])
+        seen = np.all(np.isfinite(cfg[:, :2]), axis=1)
+        cfg[~seen] = 0.0
+        return dim, cfg, seen
+
+    def _probe_velocities(self, probes: list[PlateMotion], poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Model velocities (M, R, 3) and validity (M,) of the Gauss-Newton probes (``probes[0]`` the
+        start, ``probes[1 + j]`` the start plus ``fd_step`` along input j of :func:`_to_vector`) on
+        the probes' budget, with ``local_probes``: a point part feels the plate only at its own point
+        r = (x, y), as the horizontal acceleration (p''x - alpha_z y, p''y + alpha_z x) and the normal
+        one p''z + alpha_x y - alpha_y x (and their velocities, the same map), so its velocity's
+        derivative along a rotation input is a combination of those along the translation inputs of
+        the same harmonic and component (docs/planner.md, "Local probes"). Point rows are solved for
+        the start and the translation probes only; rigid rows for every probe. A derived probe is
+        valid where the probes it is made of are."""
+        G, rows = len(self.goals), self._rows
+        R, M = len(rows), len(probes)
+        start_vel, start_ok = self._velocities(probes[:1], poses, True)   # the start: the memo's, as without
+        vel = np.zeros((M, R, 3))
+        vel[0] = start_vel[0]
+        ok = np.ones(M, bool)
+        ok[0] = bool(start_ok[0])
+        n = M - 1
+        j_all = np.arange(n)
+        axis = j_all % 6                  # inputs: 6 axes per harmonic, real parts, then imaginary ones
+        translation = np.flatnonzero(axis < 3)
+        ratio = float(_SCALE[3] / _SCALE[0])   # inputs are scaled per axis (_to_vector)
+        settings = self._probe_solver()
+        for part, js in self._groups:
+            dim, cfg, seen = self._group_configs(part, js, poses)
+            point = isinstance(part, PointPart)
+            solve = translation if point else j_all
+            v, valid = predict_velocities([probes[1 + j] for j in solve], part, cfg, settings)
+            v = np.nan_to_num(v)
+            v[:, ~seen] = 0.0
+            commanded = np.array(js) < G
+            rows_ok = np.zeros((n, len(js)), bool)
+            rows_v = np.zeros((n, len(js), dim))
+            rows_v[solve], rows_ok[solve] = v, valid
+            if point:
+                x, y = cfg[:, 0][:, None], cfg[:, 1][:, None]
+                v0 = start_vel[0][js, :dim]
+                for j in np.flatnonzero(axis >= 3):
+                    b = j - axis[j]                  # input of p''x of the same harmonic and component
+                    d = {3: y * (rows_v[b + 2] - v0), 4: -x * (rows_v[b + 2] - v0),
+                         5: -y * (rows_v[b] - v0) + x * (rows_v[b + 1] - v0)}[int(axis[j])]
+                    rows_v[j] = v0 + ratio * d
+                    parts_of = [b + 2] if axis[j] < 5 else [b, b + 1]
+                    rows_ok[j] = np.logical_and.reduce([rows_ok[i] for i in parts_of])
+            vel[1:, js, :dim] = rows_v
+            ok[1:] &= rows_ok[:, commanded].all(axis=1)
+        return vel, ok
 
     def _probe_solver(self):
         """The solver settings of the Gauss-Newton probes and trials (None: PLANNER_SOLVER's)."""
@@ -1963,7 +2032,10 @@ class MultiTask:
         for _ in range(s.gauss_newton_steps):
             probes = [_to_motion(v, freq, harmonics)] + [_to_motion(v + s.fd_step * np.eye(n)[j], freq, harmonics)
                                                          for j in range(n)]
-            r, _vel, ok = self._residuals(probes, poses, statuses, budget=True)
+            if s.local_probes and self._point_groups:
+                r, _vel, ok = self._residuals_of(probes, *self._probe_velocities(probes, poses), poses, statuses)
+            else:
+                r, _vel, ok = self._residuals(probes, poses, statuses, budget=True)
             if not ok[0]:
                 break
             J = (r[1:] - r[0]).T / s.fd_step                    # (R, n)

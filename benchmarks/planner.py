@@ -46,6 +46,8 @@ examples:
   ppod bench planner --sections multipart --counts 1 --scenes 20 --only-scenes 2 16 --planners mpc
   ppod bench planner --sections multipart --counts 1 3 --scenes 20 --seed 1 --planners mpc
   ppod bench planner --sections multipart --counts 3 --scenes 20 --plan-latency 0.3 --planners mpc
+  ppod bench planner --sections multipart --counts 4 --scenes 20 --planners mpc --mpc local_probes=false
+  ppod bench planner --sections multipart --counts 4 --scenes 5 --planners mpc --paired local_probes=false
 """
 
 from __future__ import annotations
@@ -84,10 +86,52 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="multipart: a motion the planner searched for plays this long (whole 0.1 s frames) "
                              "after the frame it was planned on, as in the running stack while the planner thinks "
                              "(default 0; a stop plays at once)")
+    parser.add_argument("--mpc", nargs="+", default=[], metavar="NAME=VALUE",
+                        help="multipart: settings of the model-predictive planner (MpcSettings fields, "
+                             "docs/planner.md), e.g. --mpc local_probes=false line_search=best")
+    parser.add_argument("--paired", nargs="+", default=None, metavar="NAME=VALUE",
+                        help="multipart: at every replanning step also step a copy of the planner with these "
+                             "settings changed (on top of --mpc), on the very same state, and report both "
+                             "planning-thread CPU times of the steps that searched, paired (the copy steps "
+                             "before or after the planner, alternating; it shares the solver's warm starts, "
+                             "so the outcomes are not those of a run without it)")
     parser.add_argument("--quick", action="store_true", help="fewer designs, starts and seconds")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of the tracker noise and of the multipart scenes (default 0; the planner's "
                              "settings were tuned on seed 0's scenes: another seed draws scenes it has not seen)")
+
+
+def mpc_settings(items: list[str], base=None):
+    """``MpcSettings`` (``base``, default the defaults) with the fields ``NAME=VALUE`` (values read
+    as YAML scalars: true, 0.5, best); ConfigError (one line) for an unknown name, a malformed item
+    or a value the settings reject."""
+    import dataclasses
+
+    import yaml
+
+    from ppod_ros.errors import ConfigError
+    from ppod_ros.planning.mpc import MpcSettings
+
+    names = {f.name for f in dataclasses.fields(MpcSettings)}
+    changes = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name:
+            raise ConfigError(f"--mpc: expected NAME=VALUE, got {item!r}")
+        if name not in names:
+            raise ConfigError(f"--mpc: unknown MpcSettings field {name!r} (docs/planner.md lists them)")
+        try:
+            changes[name] = yaml.safe_load(text)
+        except yaml.YAMLError:
+            raise ConfigError(f"--mpc: {name}: cannot read the value {text!r}") from None
+    return dataclasses.replace(base or MpcSettings(), **changes)
+
+
+def _twin_step(twin, t: float, poses) -> tuple[float, object]:
+    """(thread CPU in ms, result) of one step of a planner's copy (``bench_multipart``'s ``paired``)."""
+    c0 = time.thread_time()
+    out = type(twin).step(twin, t, poses)   # (the instance's own step is the benchmark's wrapper)
+    return 1e3 * (time.thread_time() - c0), out
 
 
 def _starts(n: int) -> list[list[float]]:
@@ -354,7 +398,9 @@ def multipart_models() -> tuple[dict, dict]:
 
 def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float,
                     planners: tuple[str, ...] = ("mpc", "template"),
-                    only: list[int] | None = None, plan_latency_s: float = 0.0) -> tuple[list[dict], list]:
+                    only: list[int] | None = None, plan_latency_s: float = 0.0,
+                    settings=None, paired=None) -> tuple[list[dict], list]:
+    import copy
     import multiprocessing
 
     from ppod_ros.planning import Task
@@ -383,16 +429,30 @@ def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float,
                          for i, (lb, g) in enumerate(zip(labels, sc["goals"]))]
                 for planner in planners:
                     if planner == "mpc":
-                        task = MultiTask(model_parts, goals, timeout_s=scene_s)
-                        records, plan_cpu, searched = [], [], []
+                        task = MultiTask(model_parts, goals, timeout_s=scene_s, settings=settings)
+                        records, plan_cpu, searched, pairs = [], [], [], []
                         step0 = task.step
 
-                        def step(t, poses, _task=task, _records=records, _step=step0, _cpu=plan_cpu, _s=searched):
+                        def step(t, poses, _task=task, _records=records, _step=step0, _cpu=plan_cpu, _s=searched,
+                                 _pairs=pairs):
+                            twin_cpu = None
+                            if paired is not None:   # the same state, the other settings: before or after
+                                twin = copy.deepcopy(_task)
+                                twin.settings = paired
+                                first = len(_cpu) % 2 == 0
+                                if first:
+                                    twin_cpu, twin_out = _twin_step(twin, t, poses)
                             c0 = time.thread_time()
                             out = _step(t, poses)
                             if out.plan_ms > 0:  # this thread's CPU: independent of the other processes' load
                                 _cpu.append(1e3 * (time.thread_time() - c0))
                                 _s.append(_task.plan_searched[-1])
+                            if paired is not None:
+                                if not first:
+                                    twin_cpu, twin_out = _twin_step(twin, t, poses)
+                                if (out.plan_ms > 0 and twin_out.plan_ms > 0 and _task.plan_searched[-1]
+                                        and twin.plan_searched[-1] and len(_cpu) > 1):
+                                    _pairs.append((_cpu[-1], twin_cpu))
                             if out.motion is not None and _task.last_prediction is not None:
                                 _records.append(dict(_task.last_prediction))
                             return out
@@ -436,6 +496,8 @@ def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float,
                         # The steps that searched the candidates (the others kept the motion playing
                         # within its dwell: a few ms).
                         row["plan_cpu_searched_ms"] = [float(c) for c, sr in zip(plan_cpu[1:], searched[1:]) if sr]
+                        if paired is not None:   # (the planner's, the copy's) per step both searched
+                            row["plan_cpu_paired_ms"] = [[float(a), float(b)] for a, b in pairs]
                         row["switch_deviation_mm"] = [1e3 * d for d in _switch_deviations(records, run, goals)]
                         # The first two motions (the plant not learned yet, the friction unknown) and the rest.
                         for key, first in (("first2", 2), ("later", -2)):
@@ -466,12 +528,17 @@ def run(args: argparse.Namespace) -> int:
         print("Sensorless (no poses), goal (0.02, -0.02):")
         result["sensorless"], paths["sensorless"] = bench_sensorless(args.quick)
     if "multipart" in args.sections:
+        settings = mpc_settings(list(getattr(args, "mpc", [])))
+        result["mpc_settings"] = list(getattr(args, "mpc", []))
+        paired_items = getattr(args, "paired", None)
+        paired = None if paired_items is None else mpc_settings(list(paired_items), settings)
+        result["paired_settings"] = paired_items
         print(f"Several parts at once: the model-predictive planner vs the template planner, {args.scenes} random "
               f"scenes per count {args.counts} (see --help for the loop):")
         result["multipart"], paths["multipart"] = bench_multipart(
             list(getattr(args, "counts", [1, 2, 3, 4])), int(getattr(args, "scenes", 2)), args.seed,
             float(getattr(args, "scene_seconds", 60.0)), tuple(getattr(args, "planners", ("mpc", "template"))),
-            getattr(args, "only_scenes", None), float(getattr(args, "plan_latency", 0.0)))
+            getattr(args, "only_scenes", None), float(getattr(args, "plan_latency", 0.0)), settings, paired)
     if "physics" in args.sections:
         print("Parts physics of the simulated device (no device process, ROS or camera), sink at the centre:")
         result["physics"] = bench_physics(args.quick)
@@ -545,6 +612,14 @@ def _summary(r: dict) -> None:
             else:
                 line += " (the bracket only)"
             print(line)
+            pairs = np.array([p for x in rows for p in x.get("plan_cpu_paired_ms", [])]).reshape(-1, 2)
+            if planner == "mpc" and len(pairs):
+                print(f"  multipart {count}, paired   : the {len(pairs)} steps both searched, on the same states: "
+                      f"median {np.median(pairs[:, 0]):.0f} ms against {np.median(pairs[:, 1]):.0f} ms with "
+                      f"{' '.join(r.get('paired_settings') or [])}, mean {pairs[:, 0].mean():.1f} against "
+                      f"{pairs[:, 1].mean():.1f} ms, 95th pct {np.percentile(pairs[:, 0], 95):.0f} against "
+                      f"{np.percentile(pairs[:, 1], 95):.0f} ms, median ratio "
+                      f"{np.median(pairs[:, 0] / pairs[:, 1]):.3f}")
     for x in r.get("physics", []):
         print(f"  physics, {x['parts']}: {x['real_time_factor']:.0f}x real time   target >= 20x")
 

@@ -1968,8 +1968,7 @@ class MultiTask:
         the same harmonic and component (docs/planner.md, "Local probes"). Point rows are solved for
         the start and the translation probes only; rigid rows for every probe. A derived probe is
         valid where the probes it is made of are."""
-        G, rows = len(self.goals), self._rows
-        R, M = len(rows), len(probes)
+        G, R, M = len(self.goals), len(self._rows), len(probes)
         start_vel, start_ok = self._velocities(probes[:1], poses, True)   # the start: the memo's, as without
         vel = np.zeros((M, R, 3))
         vel[0] = start_vel[0]
@@ -1995,13 +1994,13 @@ class MultiTask:
             if point:
                 x, y = cfg[:, 0][:, None], cfg[:, 1][:, None]
                 v0 = start_vel[0][js, :dim]
-                for j in np.flatnonzero(axis >= 3):
-                    b = j - axis[j]                  # input of p''x of the same harmonic and component
-                    d = {3: y * (rows_v[b + 2] - v0), 4: -x * (rows_v[b + 2] - v0),
-                         5: -y * (rows_v[b] - v0) + x * (rows_v[b + 1] - v0)}[int(axis[j])]
-                    rows_v[j] = v0 + ratio * d
-                    parts_of = [b + 2] if axis[j] < 5 else [b, b + 1]
-                    rows_ok[j] = np.logical_and.reduce([rows_ok[i] for i in parts_of])
+                for b in np.flatnonzero(axis == 0):   # p''x of each harmonic and component; p''y, p''z follow
+                    dx, dy, dz = rows_v[b] - v0, rows_v[b + 1] - v0, rows_v[b + 2] - v0
+                    rows_v[b + 3] = v0 + ratio * (y * dz)              # alpha_x: a_n gains alpha_x y
+                    rows_v[b + 4] = v0 + ratio * (-x * dz)             # alpha_y: a_n loses alpha_y x
+                    rows_v[b + 5] = v0 + ratio * (-y * dx + x * dy)    # alpha_z: a_h gains alpha_z (-y, x)
+                    rows_ok[b + 3] = rows_ok[b + 4] = rows_ok[b + 2]
+                    rows_ok[b + 5] = rows_ok[b] & rows_ok[b + 1]
             vel[1:, js, :dim] = rows_v
             ok[1:] &= rows_ok[:, commanded].all(axis=1)
         return vel, ok

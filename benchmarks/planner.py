@@ -101,10 +101,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "settings were tuned on seed 0's scenes: another seed draws scenes it has not seen)")
 
 
-def mpc_settings(items: list[str], base=None):
+def mpc_settings(items: list[str], base=None, option: str = "--mpc"):
     """``MpcSettings`` (``base``, default the defaults) with the fields ``NAME=VALUE`` (values read
-    as YAML scalars: true, 0.5, best); ConfigError (one line) for an unknown name, a malformed item
-    or a value the settings reject."""
+    as YAML scalars: true, 0.5, best); ConfigError (one line, naming ``option``) for an unknown
+    name, a malformed item or a value the settings reject."""
     import dataclasses
 
     import yaml
@@ -117,13 +117,13 @@ def mpc_settings(items: list[str], base=None):
     for item in items:
         name, sep, text = item.partition("=")
         if not sep or not name:
-            raise ConfigError(f"--mpc: expected NAME=VALUE, got {item!r}")
+            raise ConfigError(f"{option}: expected NAME=VALUE, got {item!r}")
         if name not in names:
-            raise ConfigError(f"--mpc: unknown MpcSettings field {name!r} (docs/planner.md lists them)")
+            raise ConfigError(f"{option}: unknown MpcSettings field {name!r} (docs/planner.md lists them)")
         try:
             changes[name] = yaml.safe_load(text)
         except yaml.YAMLError:
-            raise ConfigError(f"--mpc: {name}: cannot read the value {text!r}") from None
+            raise ConfigError(f"{option}: {name}: cannot read the value {text!r}") from None
     return dataclasses.replace(base or MpcSettings(), **changes)
 
 
@@ -531,7 +531,7 @@ def run(args: argparse.Namespace) -> int:
         settings = mpc_settings(list(getattr(args, "mpc", [])))
         result["mpc_settings"] = list(getattr(args, "mpc", []))
         paired_items = getattr(args, "paired", None)
-        paired = None if paired_items is None else mpc_settings(list(paired_items), settings)
+        paired = None if paired_items is None else mpc_settings(list(paired_items), settings, "--paired")
         result["paired_settings"] = paired_items
         print(f"Several parts at once: the model-predictive planner vs the template planner, {args.scenes} random "
               f"scenes per count {args.counts} (see --help for the loop):")

@@ -110,6 +110,9 @@ def test_the_benchmark_reads_planner_settings_as_name_value_pairs(tmp_path):
                               scenes=1, scene_seconds=1.0, planners=["mpc"], mpc=["local_probs=1"])
     with pytest.raises(ConfigError, match="local_probs"):
         bench.run(args)
+    args.mpc, args.paired = [], ["local_probs=1"]
+    with pytest.raises(ConfigError, match="--paired: unknown MpcSettings field 'local_probs'"):
+        bench.run(args)
 
 
 def test_the_benchmark_pairs_the_planner_with_a_copy_on_the_same_states(tmp_path, capsys):

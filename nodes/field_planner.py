@@ -176,6 +176,7 @@ class _RunningTask:
         self.stopped_poses: np.ndarray | None = None
         self.lease_stops = 0
         self.step_called_at: float | None = None   # device time the step being planned was submitted
+        self.last_plan_ms = 0.0    # wall time of the goal's last replanning step (steps between report 0)
 
 
 class FieldPlannerNode(PpodLifecycleNode):
@@ -585,6 +586,8 @@ class FieldPlannerNode(PpodLifecycleNode):
             self._finish(False, f"planning failed: {step}")
             return
         run.last_step = step
+        if step.plan_ms > 0:
+            run.last_plan_ms = float(step.plan_ms)
         if publish_motion and step.motion is not None and step.motion.key != run.last_motion_key:
             run.last_motion_key = step.motion.key
             self.goal_pub.publish(motion_to_msg(step.motion, self.get_clock().now().to_msg()))
@@ -593,7 +596,7 @@ class FieldPlannerNode(PpodLifecycleNode):
                 # approach gain for it (MpcSettings.latency_ref_s).
                 run.task.command_latency(self._now() - run.step_called_at)
         if run.multi:
-            fb = MoveParts.Feedback(phase=step.phase, text=step.text, plan_ms=float(step.plan_ms))
+            fb = MoveParts.Feedback(phase=step.phase, text=step.text, plan_ms=run.last_plan_ms)
             for st in step.parts:
                 fb.part_ids.append(int(run.ids[st.index]))
                 fb.position_error_m.append(float(st.position_error_m))

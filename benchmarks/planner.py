@@ -103,7 +103,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def mpc_settings(items: list[str], base=None, option: str = "--mpc"):
     """``MpcSettings`` (``base``, default the defaults) with the fields ``NAME=VALUE`` (values read
-    as YAML scalars: true, 0.5, best); ConfigError (one line, naming ``option``) for an unknown
+    as YAML scalars: true, 0.5, 1e-3, best); ConfigError (one line, naming ``option``) for an unknown
     name, a malformed item or a value the settings reject."""
     import dataclasses
 
@@ -121,9 +121,15 @@ def mpc_settings(items: list[str], base=None, option: str = "--mpc"):
         if name not in names:
             raise ConfigError(f"{option}: unknown MpcSettings field {name!r} (docs/planner.md lists them)")
         try:
-            changes[name] = yaml.safe_load(text)
+            value = yaml.safe_load(text)
         except yaml.YAMLError:
             raise ConfigError(f"{option}: {name}: cannot read the value {text!r}") from None
+        if isinstance(value, str):   # YAML 1.1 reads 1e-3 (no dot) as text: a number where it is one
+            try:
+                value = float(value)
+            except ValueError:
+                pass
+        changes[name] = value
     return dataclasses.replace(base or MpcSettings(), **changes)
 
 

@@ -101,6 +101,8 @@ def test_the_setting_is_a_bool():
 def test_the_benchmark_reads_planner_settings_as_name_value_pairs(tmp_path):
     s = bench.mpc_settings(["local_probes=false", "line_search=best", "fd_step=0.05"])
     assert (s.local_probes, s.line_search, s.fd_step) == (False, "best", 0.05)
+    # A number without a dot (YAML 1.1 reads 1e-3 as text) is the number.
+    assert bench.mpc_settings(["fd_step=3e-2"]).fd_step == 0.03
     for bad, match in ((["local_probs=true"], "unknown MpcSettings field 'local_probs'"),
                        (["local_probes"], "expected NAME=VALUE"), (["fd_step=-1"], "fd_step"),
                        (["local_probes=maybe"], "local_probes")):

@@ -580,14 +580,24 @@ class FieldPlannerNode(PpodLifecycleNode):
                                 "time (abandoned; see the node's log); plate stopped")
 
     def _apply(self, run: _RunningTask, t_s: float, outcome, publish_motion: bool = True) -> None:
-        """Publish a finished step: its motion (when new), the action feedback and the progress."""
+        """Publish a finished step: its motion (when new), the action feedback and the progress. A
+        failure doing so (a bug) ends the goal with the reason and stops the plate, as a planning
+        step's does: the goal must not wait for steps that are never applied, nor the node die."""
+        try:
+            self._publish_step(run, t_s, outcome, publish_motion)
+        except Exception as exc:
+            self.get_logger().error(f"applying a planning step raised {type(exc).__name__}: {exc}")
+            self._finish(False, f"planning failed (internal error applying a step, {type(exc).__name__}: "
+                                f"{exc}); plate stopped")
+
+    def _publish_step(self, run: _RunningTask, t_s: float, outcome, publish_motion: bool) -> None:
         step, step_ms = outcome
         if isinstance(step, PpodError):
             self._finish(False, f"planning failed: {step}")
             return
-        run.last_step = step
-        if step.plan_ms > 0:
-            run.last_plan_ms = float(step.plan_ms)
+        plan_ms = getattr(step, "plan_ms", 0.0)   # MultiStep's (a Task's or SensorlessTask's step has none)
+        if plan_ms > 0:
+            run.last_plan_ms = float(plan_ms)
         if publish_motion and step.motion is not None and step.motion.key != run.last_motion_key:
             run.last_motion_key = step.motion.key
             self.goal_pub.publish(motion_to_msg(step.motion, self.get_clock().now().to_msg()))
@@ -615,6 +625,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         extra = {"command_latency_s": run.task.latency_s} if isinstance(run.task, MultiTask) else {}
         self.diagnostics.set("task", diag.OK, step.text, phase=step.phase, position_error_m=step.position_error_m,
                              step_ms=step_ms, lease_stops=run.lease_stops, **extra)
+        run.last_step = step   # published: the goal's result reads it
         if step.done or step.failed_reason:
             self._finish(step.done and not step.failed_reason, step.failed_reason or step.text)
 

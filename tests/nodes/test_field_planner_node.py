@@ -314,6 +314,42 @@ def test_a_late_plan_stops_the_plate_at_the_lease_and_is_dropped(ros, monkeypatc
     ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
 
 
+def test_a_step_that_cannot_be_applied_ends_the_goal_instead_of_hanging_it(ros, monkeypatch):
+    """A sensorless MovePart whose step the node cannot publish (a bug: a step without the fields
+    the node reads; a Task's step once met ``step.plan_ms``) ends failed with the reason, with the
+    plate stopped, and the node accepts the next goal; it used to wait for steps forever."""
+    from ppod_msgs.action import MovePart
+
+    import ppod_nodes.field_planner as fp
+    from ppod_nodes.common import topics
+    from ppod_nodes.common.actions import ActionClient
+
+    broken = [True]
+    real = fp.SensorlessTask.step
+
+    def step(self, t_s, poses=None):
+        out = real(self, t_s, poses)
+        return object() if broken[0] else out   # no phase, text, motion ...
+
+    monkeypatch.setattr(fp.SensorlessTask, "step", step)
+    node = _active(ros, ros.make(fp.FieldPlannerNode))
+    client = ActionClient(ros.node, MovePart, "/" + topics.MOVE_PART)
+    ros.wait_for_action_server(client)
+    goal = MovePart.Goal(part_id=3, sensorless=True)
+    goal.target.x, goal.target.y = 0.01, -0.015
+    handle = ros.wait_future(client.send_goal_async(goal), 30, "goal")
+    assert handle.accepted
+    result = handle.get_result_async()
+    assert ros.wait_until(result.done, 20.0), "the goal did not end after its step failed to apply"
+    res = result.result().result
+    assert not res.success and "internal error applying a step" in res.reason
+    assert node.running is None
+    broken[0] = False  # the node lives on: the next goal runs
+    handle = ros.wait_future(client.send_goal_async(goal), 30, "goal")
+    assert handle.accepted
+    ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
+
+
 def test_a_planner_error_ends_the_goal_and_stops_the_plate_without_killing_the_node(ros, monkeypatch):
     """An unexpected exception in a planning step (a bug) aborts the goal with the reason and stops
     the plate; the node lives on and accepts the next goal."""

@@ -143,6 +143,12 @@ def reassociate(ids: list[int], labels: list, last_xy: list, by_id: dict) -> Non
             taken.add(ids[row])
 
 
+def _track_names(ids: list[int]) -> list[str]:
+    """What the planner's texts call each row: its track id (``ppod move`` and MoveParts name parts
+    by it), not the row of the planner's pose table."""
+    return [f"track {i}" for i in ids]
+
+
 def _progress(fb, multi: bool, stamp) -> PlannerProgress:
     """The action feedback ``fb`` as a PlannerProgress message (the plain, recordable copy)."""
     msg = PlannerProgress(action="move_parts" if multi else "move_part", phase=fb.phase, text=fb.text)
@@ -321,7 +327,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         goals = part_goals_from_request(goal, ids, p["position_tolerance_m"],
                                         math.radians(p["orientation_tolerance_deg"]))
         task = MultiTask(parts, goals, device=self.device, timeout_s=goal.timeout_s or p["timeout_s"],
-                         keep_clear=bool(goal.keep_others_clear))
+                         keep_clear=bool(goal.keep_others_clear), names=_track_names(ids))
         return task, ids
 
     async def _execute_multi(self, handle) -> MoveParts.Result:
@@ -412,7 +418,7 @@ class FieldPlannerNode(PpodLifecycleNode):
         # One part, nothing to gather: the model-predictive planner with one goal (one bracket in the
         # benchmark: 10 of 10 reached against 7 of 10 for the template planner; docs/planner.md).
         one = PartGoal(ids.index(int(goal.part_id)), target[0], target[1], theta, position_tol, angle_tol)
-        return MultiTask(parts, [one], device=self.device, timeout_s=timeout), ids
+        return MultiTask(parts, [one], device=self.device, timeout_s=timeout, names=_track_names(ids)), ids
 
     async def _execute(self, handle) -> MovePart.Result:
         goal: MovePart.Goal = handle.request

@@ -85,6 +85,20 @@ def summarize(goals: list[dict], parts, t: np.ndarray, poses: np.ndarray, t_star
             "real_time_factor": float(real_time_factor), "parts": entries}
 
 
+def progress_line(goals: list[dict], ids: list[int], fb) -> str:
+    """One line of MoveParts feedback ``fb`` with each part named as the demo names it (scene index
+    and label; ``ids``: the track id of each goal, in the goals' order)."""
+    by_id = {int(tid): g for tid, g in zip(ids, goals)}
+    bits = []
+    for pid, d, a, ok in zip(fb.part_ids, fb.position_error_m, fb.orientation_error_rad, fb.within):
+        g = by_id.get(int(pid))
+        b = (f"#{g['index']} ({g['label']})" if g is not None else f"track {pid}") + f" {1e3 * d:.1f} mm"
+        if g is not None and g["theta_rad"] is not None:
+            b += f" {math.degrees(a):+.1f} deg"
+        bits.append(b + (" ok" if ok else ""))
+    return f"{fb.phase}: " + ", ".join(bits)
+
+
 def _goal_out(g: dict) -> list:
     return [g["x"], g["y"], None if g["theta_rad"] is None else math.degrees(g["theta_rad"])]
 
@@ -158,21 +172,23 @@ class MultiDemo(_Demo):
             self.log.add_feedback(t, fb.phase, fb.text, err)
             if t - last_print[0] >= 2.0:
                 last_print[0] = t
-                _say(f"t = {t - self.t_start:5.1f} s  {fb.text}  (replanned in {fb.plan_ms:.0f} ms)")
+                _say(f"t = {t - self.t_start:5.1f} s  {progress_line(self.goals, ids, fb)}  "
+                     f"(replanned in {fb.plan_ms:.0f} ms)")
 
         self.wall_goals = time.monotonic()
         self.t_start = self.log.latest_truth()[0]
         res = await_goal(ros, stack, client, goal, on_feedback, "MoveParts", self.wall_goals,
                          3 * self.args.timeout + 60,
                          "the field_planner rejected the MoveParts goals (see the log for the reason)",
-                         f"MoveParts accepted: tracks {ids}")
+                         "MoveParts accepted: " + ", ".join(
+                             f"#{g['index']} ({g['label']}) is track {tid}" for g, tid in zip(self.goals, ids)))
         wall = time.monotonic() - self.wall_goals
         device_s = float(self.log.latest_truth()[0] - self.t_start)  # at the same moment as the wall time
         ros.wait_until(lambda: False, 0.3)  # the last truth frames (for the final poses only)
         t, poses = self.log.trajectories()
         self.summary = summarize(self.goals, [p.part for p in self.scene.parts], t, poses, self.t_start, device_s,
                                  device_s / max(wall, 1e-9))
-        _say(("done: " if res.success else "not reached: ") + res.reason)
+        _say(("planner: " if res.success else "not reached: ") + res.reason)
         for e in self.summary["parts"]:
             ang = "" if e["angle_error_deg"] is None else f", {e['angle_error_deg']:.2f} deg"
             ttg = "" if e["time_to_goal_s"] is None else f", in tolerance from {e['time_to_goal_s']:.1f} s"

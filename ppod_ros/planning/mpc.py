@@ -836,15 +836,21 @@ class MultiTask:
 
     ``parts`` are the planner's models of every tracked part (rows of the poses); ``goals`` the
     commanded ones. ``keep_clear``: the uncommanded parts enter the collision penalty too.
+    ``names``: what the progress and result texts call each row (default ``#row``; the node: the
+    tracker's ids, which its user knows the parts by).
     """
 
     def __init__(self, parts: Sequence[PointPart | RigidPart], goals: Sequence[PartGoal], *, device=None,
-                 settings: MpcSettings | None = None, timeout_s: float = 60.0, keep_clear: bool = False):
+                 settings: MpcSettings | None = None, timeout_s: float = 60.0, keep_clear: bool = False,
+                 names: Sequence[str] | None = None):
         from ppod_ros.device import default_device_config
 
         self.parts = list(parts)
         if not self.parts:
             raise ConfigError("parts: expected at least one part")
+        self.names = [f"#{i}" for i in range(len(self.parts))] if names is None else [str(n) for n in names]
+        if len(self.names) != len(self.parts):
+            raise ConfigError(f"names: expected one per part ({len(self.parts)}), got {len(self.names)}")
         self.settings = settings or MpcSettings()
         if not isinstance(self.settings, MpcSettings):
             raise ConfigError(f"settings: expected MpcSettings, got {type(self.settings).__name__}")
@@ -2075,7 +2081,7 @@ class MultiTask:
     def _text(self, statuses) -> str:
         bits = []
         for st in statuses:
-            b = f"#{st.index} {1e3 * st.position_error_m:.1f} mm"
+            b = f"{self.names[st.index]} {1e3 * st.position_error_m:.1f} mm"
             if st.angle_error_rad is not None:
                 b += f" {math.degrees(st.angle_error_rad):+.1f} deg"
             if st.within:
@@ -2087,7 +2093,7 @@ class MultiTask:
         d, a = self._worst(statuses)
         def one(st: PartStatus) -> str:
             a = "" if st.angle_error_rad is None else f" {math.degrees(abs(st.angle_error_rad)):.2f} deg"
-            return f"#{st.index} {1e3 * st.position_error_m:.2f} mm{a}"
+            return f"{self.names[st.index]} {1e3 * st.position_error_m:.2f} mm{a}"
 
         text = (f"done in {elapsed:.1f} s: " + ", ".join(one(st) for st in statuses)) if failed is None \
             else f"failed: {failed}"

@@ -97,6 +97,39 @@ def test_the_multi_goal_summary_follows_the_ground_truth(tmp_path):
     assert (tmp_path / "multi.png").stat().st_size > 1000
 
 
+def test_the_demo_s_progress_names_each_part_as_the_demo_does_not_by_track_or_planner_row():
+    from types import SimpleNamespace
+
+    from ppod_nodes.cli.demo_multi import goals_for_scene, progress_line
+
+    scene = load_scene(default_scene_path())
+    goals = goals_for_scene(scene, None)   # #0 bracket (oriented), then the two washers
+    ids = [4, 3, 2]                        # their track ids, in the goals' order
+    # The planner reports in its own order (here the tracks' rows); orientation 0 for position-only goals.
+    fb = SimpleNamespace(phase="moving", part_ids=[3, 4, 2], position_error_m=[0.0292, 0.0361, 0.0005],
+                         orientation_error_rad=[0.0, math.radians(51.6), 0.0], within=[False, False, True])
+    line = progress_line(goals, ids, fb)
+    w1, w2 = goals[1]["index"], goals[2]["index"]
+    assert line == (f"moving: #{w1} (washer) 29.2 mm, #0 (bracket) 36.1 mm +51.6 deg, "
+                    f"#{w2} (washer) 0.5 mm ok")
+
+
+def test_the_planner_node_s_texts_name_parts_by_track_id():
+    from ppod_nodes.field_planner import _track_names
+    from ppod_ros.parts import PointPart
+    from ppod_ros.planning.mpc import MultiTask, PartGoal
+
+    parts = [PointPart(0.3), PointPart(0.3)]
+    goals = [PartGoal(1, 0.02, 0.0, None, 2e-3)]
+    poses = np.array([[-0.03, 0.03, 0.0], [0.02, 0.0, 0.0]])   # the commanded part already at its goal
+    task = MultiTask(parts, goals, timeout_s=10.0, names=_track_names([7, 9]))
+    step = task.step(0.0, poses)
+    assert "track 9 0.0 mm" in step.text and "#1" not in step.text
+    assert MultiTask(parts, goals, timeout_s=10.0).step(0.0, poses).text.startswith(f"{step.phase}: #1 ")
+    with pytest.raises(ConfigError, match="names: expected one per part"):
+        MultiTask(parts, goals, timeout_s=10.0, names=["track 7"])
+
+
 def test_goals_are_not_combined_with_part_or_goal():
     import argparse
 

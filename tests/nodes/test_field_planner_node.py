@@ -150,13 +150,16 @@ def test_a_sensorless_move_part_positions_a_part_no_camera_sees(ros):
     handle = ros.wait_future(client.send_goal_async(goal, feedback_callback=feedback.append), 30, "goal")
     assert handle.accepted
     result = handle.get_result_async()
+    silent = 0   # ticks in a row without feedback: a node that stopped stepping fails here, not in 10 min
     while not result.done() and t[0] < 60.0:
         n = len(feedback)
         motion = motion_from_msg(goals[-1]) if goals else PlateMotion.zero()
         dyn.advance(motion, t[0], 0.1)
         t[0] += 0.1
         clock_pub.publish(Clock(clock=seconds_to_stamp(t[0])))
-        ros.wait_until(lambda n=n: len(feedback) > n or result.done(), 1.0)  # the node's timer stepped
+        stepped = ros.wait_until(lambda n=n: len(feedback) > n or result.done(), 1.0)  # the node's timer stepped
+        silent = 0 if stepped else silent + 1
+        assert silent < 10, f"the node stopped stepping the sensorless goal at t = {t[0]:.1f} s"
     assert result.done(), "the sensorless MovePart did not finish within 60 s of device time"
     res = result.result().result
     assert res.success, res.reason

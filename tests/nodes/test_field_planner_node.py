@@ -319,8 +319,9 @@ def test_a_late_plan_stops_the_plate_at_the_lease_and_is_dropped(ros, monkeypatc
 
 def test_a_step_that_cannot_be_applied_ends_the_goal_instead_of_hanging_it(ros, monkeypatch):
     """A sensorless MovePart whose step the node cannot publish (a bug: a step without the fields
-    the node reads; a Task's step once met ``step.plan_ms``) ends failed with the reason, with the
-    plate stopped, and the node accepts the next goal; it used to wait for steps forever."""
+    the node reads; a Task's step once met ``step.plan_ms``) ends failed with the reason (the node
+    asks the device to stop the plate, as for any failed goal), and the node accepts the next goal;
+    it used to wait for steps forever."""
     from ppod_msgs.action import MovePart
 
     import ppod_nodes.field_planner as fp

@@ -2,16 +2,44 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any
 
 from ppod_nodes.common.session import RosSession
+from ppod_ros.errors import DeviceError
 
 
 class RosHarness(RosSession):
     def __init__(self, args: list[str] | None = None):
         super().__init__("test_helper", args)
         self.helper = self.node
+
+    def check_callbacks(self) -> None:
+        """AssertionError if a callback raised: the executor thread then stopped spinning (in the
+        stack the node's process would have ended, ``runner.spin_until_halted``), so a test waiting
+        on the nodes fails now, naming the exception, instead of at the end of its wait."""
+        if self.failures:
+            exc = self.failures[0]
+            raise AssertionError(f"a node's callback raised {type(exc).__name__}: {exc} (the executor stopped "
+                                 f"spinning; in the stack the node would have exited)")
+
+    def wait_until(self, predicate: Callable[[], bool], timeout_s: float, step_s: float = 0.01) -> bool:
+        """:meth:`RosSession.wait_until`, failing at once when a callback raised (:meth:`check_callbacks`)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            self.check_callbacks()
+            if predicate():
+                return True
+            time.sleep(step_s)
+        self.check_callbacks()
+        return bool(predicate())
+
+    def wait_future(self, future, timeout_s: float, what: str):
+        """:meth:`RosSession.wait_future`, failing at once when a callback raised."""
+        if not self.wait_until(future.done, timeout_s, step_s=0.005):
+            raise DeviceError(f"{what}: no answer within {timeout_s:g} s")
+        return future.result()
 
     def make(self, factory: Callable[..., Any], parameter_overrides: list | None = None, **kwargs):
         """Create a node with this harness's context (factory(context=..., ...)) and spin it."""

@@ -105,6 +105,7 @@ def mpc_settings(items: list[str], base=None, option: str = "--mpc"):
     """``MpcSettings`` (``base``, default the defaults) with the fields ``NAME=VALUE`` (values read
     as YAML scalars: true, 0.5, 1e-3, best); ConfigError (one line, naming ``option``) for an unknown
     name, a malformed item or a value the settings reject."""
+    import contextlib
     import dataclasses
 
     import yaml
@@ -125,10 +126,8 @@ def mpc_settings(items: list[str], base=None, option: str = "--mpc"):
         except yaml.YAMLError:
             raise ConfigError(f"{option}: {name}: cannot read the value {text!r}") from None
         if isinstance(value, str):   # YAML 1.1 reads 1e-3 (no dot) as text: a number where it is one
-            try:
+            with contextlib.suppress(ValueError):
                 value = float(value)
-            except ValueError:
-                pass
         changes[name] = value
     return dataclasses.replace(base or MpcSettings(), **changes)
 

@@ -625,3 +625,80 @@ def test_a_stuck_step_of_a_cancelled_goal_does_not_block_the_next_goal(ros, monk
         ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
     finally:
         gate.set()
+
+
+def test_malformed_move_parts_goals_and_poses_never_stop_the_node(ros):
+    """Goals with non-finite, out-of-range or inconsistent fields, and tracked poses that are NaN
+    or infinite: each goal is rejected or ends (cancelled at the latest), no callback raises (the
+    harness fails the test at once if one does: in the stack the node would exit), and a good goal
+    is still accepted at the end. Bounded: 11 goals, at most 20 frames each."""
+    from geometry_msgs.msg import Pose2D
+    from ppod_msgs.action import MoveParts
+    from ppod_msgs.msg import PartPose, PartPoseArray
+
+    import ppod_nodes.field_planner as fp
+    from ppod_nodes.common import qos, topics
+    from ppod_nodes.common.actions import ActionClient
+    from ppod_nodes.common.convert import seconds_to_stamp
+
+    node = _active(ros, ros.make(fp.FieldPlannerNode))
+    poses_pub = ros.node.create_publisher(PartPoseArray, topics.PART_POSES, qos.STREAM)
+    t = [0.0]
+    nan, inf = float("nan"), float("inf")
+
+    def frame() -> None:
+        msg = PartPoseArray()
+        msg.header.stamp = seconds_to_stamp(t[0])
+        for pid, x, y in ((7, -0.04, 0.035), (8, nan, 0.01), (9, inf, -inf)):
+            p = PartPose(id=pid, label="washer", status=PartPose.STATUS_TRACKED)
+            p.pose.x, p.pose.y = x, y
+            msg.parts.append(p)
+        poses_pub.publish(msg)
+        t[0] += 0.1
+        ros.wait_until(lambda: False, 0.05)
+
+    for _ in range(3):
+        frame()
+    client = ActionClient(ros.node, MoveParts, "/" + topics.MOVE_PARTS)
+    ros.wait_for_action_server(client)
+    ok = Pose2D(x=-0.02, y=0.01)
+    bad = [
+        MoveParts.Goal(part_ids=[7], targets=[]),                                   # lengths differ
+        MoveParts.Goal(part_ids=[7], targets=[Pose2D(x=nan, y=0.0)]),
+        MoveParts.Goal(part_ids=[7], targets=[Pose2D(x=inf, y=0.0)]),
+        MoveParts.Goal(part_ids=[7], targets=[Pose2D(x=1.0, y=1.0)]),              # off the plate
+        MoveParts.Goal(part_ids=[7, 7], targets=[ok, Pose2D(x=0.02, y=-0.01)]),    # one part twice
+        MoveParts.Goal(part_ids=[7], targets=[ok], position_tolerance_m=[-1.0]),
+        MoveParts.Goal(part_ids=[7], targets=[ok], position_tolerance_m=[nan]),
+        MoveParts.Goal(part_ids=[7], targets=[ok], use_orientation=[True], orientation_tolerance_rad=[inf]),
+        MoveParts.Goal(part_ids=[7], targets=[ok], timeout_s=nan),
+        MoveParts.Goal(part_ids=[7], targets=[ok], timeout_s=-5.0),
+        MoveParts.Goal(part_ids=[8, 9], targets=[ok, Pose2D(x=0.02, y=-0.01)]),     # tracked, never seen
+    ]
+    outcomes = []
+    for goal in bad:
+        handle = ros.wait_future(client.send_goal_async(goal), 10, "goal")
+        if not handle.accepted:
+            outcomes.append("rejected")
+            continue
+        result = handle.get_result_async()
+        for _ in range(20):
+            if result.done():
+                break
+            frame()
+        if not result.done():
+            ros.wait_future(handle.cancel_goal_async(), 10, "cancel")
+            for _ in range(20):
+                if result.done():
+                    break
+                frame()
+        assert result.done(), f"goal {goal} neither ended nor cancelled"
+        outcomes.append("ended")
+        assert ros.wait_until(lambda: node.running is None, 5.0)
+    # Every inconsistent, non-finite or out-of-range goal is rejected up front; the parts tracked but
+    # never seen are accepted (they are tracked) and the goal ends.
+    assert outcomes == ["rejected"] * 10 + ["ended"], outcomes
+    assert node.lifecycle_state == "active"
+    handle = ros.wait_future(client.send_goal_async(MoveParts.Goal(part_ids=[7], targets=[ok])), 10, "goal")
+    assert handle.accepted
+    ros.wait_future(handle.cancel_goal_async(), 10, "cancel")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -26,14 +25,12 @@ class RosHarness(RosSession):
 
     def wait_until(self, predicate: Callable[[], bool], timeout_s: float, step_s: float = 0.01) -> bool:
         """:meth:`RosSession.wait_until`, failing at once when a callback raised (:meth:`check_callbacks`)."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
+
+        def checked() -> bool:
             self.check_callbacks()
-            if predicate():
-                return True
-            time.sleep(step_s)
-        self.check_callbacks()
-        return bool(predicate())
+            return predicate()
+
+        return RosSession.wait_until(checked, timeout_s, step_s)
 
     def wait_future(self, future, timeout_s: float, what: str):
         """:meth:`RosSession.wait_future`, failing at once when a callback raised."""

@@ -13,6 +13,7 @@ import numpy as np
 from ppod_nodes.cli.demo import _Demo, _say, await_goal
 from ppod_ros.errors import ConfigError, DeviceError
 from ppod_ros.planning.goals import GoalEntry, load_goals_file, resolve_parts
+from ppod_ros.planning.mpc import progress_bit
 
 #: The default set: the bracket, oriented, and the two washers of the default scene, to the issue's
 #: three-part tolerances (2 mm / 3 deg). The planner judges "done" by the tracker, whose error on the
@@ -92,10 +93,9 @@ def progress_line(goals: list[dict], ids: list[int], fb) -> str:
     bits = []
     for pid, d, a, ok in zip(fb.part_ids, fb.position_error_m, fb.orientation_error_rad, fb.within):
         g = by_id.get(int(pid))
-        b = (f"#{g['index']} ({g['label']})" if g is not None else f"track {pid}") + f" {1e3 * d:.1f} mm"
-        if g is not None and g["theta_rad"] is not None:
-            b += f" {math.degrees(a):+.1f} deg"
-        bits.append(b + (" ok" if ok else ""))
+        name = f"#{g['index']} ({g['label']})" if g is not None else f"track {pid}"
+        oriented = g is not None and g["theta_rad"] is not None   # the feedback's angle is 0 otherwise
+        bits.append(progress_bit(name, d, a if oriented else None, ok))
     return f"{fb.phase}: " + ", ".join(bits)
 
 

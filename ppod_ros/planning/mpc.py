@@ -570,6 +570,16 @@ BASE_KINDS: dict[str, Callable[[MpcSettings], FieldSpec]] = {
 }
 
 
+def progress_bit(name: str, position_error_m: float, angle_error_rad: float | None, within: bool) -> str:
+    """One part in a progress line ("track 4 36.1 mm +51.6 deg", " ok" once within tolerance; no
+    angle for a position-only goal): the planner's texts and ``ppod demo``'s, which names parts its
+    own way, share it."""
+    b = f"{name} {1e3 * position_error_m:.1f} mm"
+    if angle_error_rad is not None:
+        b += f" {math.degrees(angle_error_rad):+.1f} deg"
+    return b + (" ok" if within else "")
+
+
 def base_design(kind: str, device, settings: MpcSettings | None = None) -> PlateMotion:
     """The template ``kind`` (BASE_KINDS) designed at the plate centre (cached by design_field: call
     it once at start-up, e.g. when a node configures, so the first replanning step does not pay
@@ -2079,15 +2089,9 @@ class MultiTask:
         return (max(d) if d else math.nan), (max(a) if a else None)
 
     def _text(self, statuses) -> str:
-        bits = []
-        for st in statuses:
-            b = f"{self.names[st.index]} {1e3 * st.position_error_m:.1f} mm"
-            if st.angle_error_rad is not None:
-                b += f" {math.degrees(st.angle_error_rad):+.1f} deg"
-            if st.within:
-                b += " ok"
-            bits.append(b)
-        return f"{self.phase}: " + ", ".join(bits)
+        return f"{self.phase}: " + ", ".join(
+            progress_bit(self.names[st.index], st.position_error_m, st.angle_error_rad, st.within)
+            for st in statuses)
 
     def _end(self, statuses, failed: str | None, elapsed: float | None = None) -> MultiStep:
         d, a = self._worst(statuses)
@@ -2109,4 +2113,4 @@ class MultiTask:
 
 __all__ = ["BASE_KINDS", "TEMPLATES", "TEMPLATE_BASES", "MpcSettings", "MultiStep", "MultiTask", "PartGoal",
            "PartStatus", "base_design", "base_kinds", "check_goals", "line_through", "moved", "part_radius_m",
-           "ramped_displacement", "template_motion"]
+           "progress_bit", "ramped_displacement", "template_motion"]

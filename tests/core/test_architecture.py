@@ -19,7 +19,7 @@ CORE_ALLOWED = {
     "actuation": {"can", "device", "errors", "kinematics", "motion"},
     "vision": {"config", "errors", "parts"},
     "control": {"actuation", "config", "device", "errors", "estimation", "motion"},
-    "planning": {"actuation", "config", "device", "errors", "motion", "parts", "physics"},
+    "planning": {"actuation", "config", "control", "device", "errors", "motion", "parts", "physics"},
     "view": {"errors", "parts", "physics"},
     "__init__": {"errors", "motion"},
 }

@@ -95,6 +95,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "planning-thread CPU times of the steps that searched, paired (the copy steps "
                              "before or after the planner, alternating; it shares the solver's warm starts, "
                              "so the outcomes are not those of a run without it)")
+    parser.add_argument("--plant-learning", choices=["learner", "goals"], default="learner",
+                        help="multipart: how the simulated feedback learns the random plant error (learner: the "
+                             "feedback's own plant learner, taught as the feedback samples each motion, a new "
+                             "motion starting from what it predicts; goals: the first two motions start "
+                             "uncorrected, every later one 4 %% off; default learner)")
     parser.add_argument("--quick", action="store_true", help="fewer designs, starts and seconds")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of the tracker noise and of the multipart scenes (default 0; the planner's "
@@ -404,7 +409,7 @@ def multipart_models() -> tuple[dict, dict]:
 def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float,
                     planners: tuple[str, ...] = ("mpc", "template"),
                     only: list[int] | None = None, plan_latency_s: float = 0.0,
-                    settings=None, paired=None) -> tuple[list[dict], list]:
+                    settings=None, paired=None, plant_learning: str = "learner") -> tuple[list[dict], list]:
     import copy
     import multiprocessing
 
@@ -468,7 +473,7 @@ def bench_multipart(counts: list[int], n_scenes: int, seed: int, scene_s: float,
                         task = Task(model_parts, 0, (g0.x_m, g0.y_m, g0.theta_rad), position_tol_m=pos_tol,
                                     angle_tol_rad=ang_tol, timeout_s=scene_s)
                     w0 = time.perf_counter()
-                    plant = ActuatorPlantError.random(np.random.default_rng(sc["plant_seed"]))
+                    plant = ActuatorPlantError.random(np.random.default_rng(sc["plant_seed"]), learning=plant_learning)
                     run = run_on_dynamics(task, true_parts, sc["starts"], horizon_s=scene_s + 1.0, ramp_s=0.5,
                                           latency_s=0.1, plant=plant,
                                           separate=_separation(scene_parts), seed=sc["plant_seed"] % 1000,
@@ -538,12 +543,14 @@ def run(args: argparse.Namespace) -> int:
         paired_items = getattr(args, "paired", None)
         paired = None if paired_items is None else mpc_settings(list(paired_items), settings, "--paired")
         result["paired_settings"] = paired_items
+        result["plant_learning"] = getattr(args, "plant_learning", "learner")
         print(f"Several parts at once: the model-predictive planner vs the template planner, {args.scenes} random "
               f"scenes per count {args.counts} (see --help for the loop):")
         result["multipart"], paths["multipart"] = bench_multipart(
             list(getattr(args, "counts", [1, 2, 3, 4])), int(getattr(args, "scenes", 2)), args.seed,
             float(getattr(args, "scene_seconds", 60.0)), tuple(getattr(args, "planners", ("mpc", "template"))),
-            getattr(args, "only_scenes", None), float(getattr(args, "plan_latency", 0.0)), settings, paired)
+            getattr(args, "only_scenes", None), float(getattr(args, "plan_latency", 0.0)), settings, paired,
+            result["plant_learning"])
     if "physics" in args.sections:
         print("Parts physics of the simulated device (no device process, ROS or camera), sink at the centre:")
         result["physics"] = bench_physics(args.quick)

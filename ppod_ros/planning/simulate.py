@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ppod_ros.actuation.corrections import limit_over
+from ppod_ros.errors import ConfigError
 from ppod_ros.motion import PlateMotion, crossfade
 from ppod_ros.parts import PointPart, RigidPart
 from ppod_ros.physics import PartDynamics
@@ -58,7 +59,7 @@ class PlantError:
         C = C * scale[:, None] / scale[None, :]
         return cls(np.diag(g * np.exp(1j * ph)) - np.eye(6) + C, **kwargs)
 
-    def played(self, motion, since_switch_s: float, goal_number: int):
+    def played(self, motion, since_switch_s: float, goal_number: int, frame_s: float = 0.0):
         if motion is None or motion.is_zero():
             return motion
         frac = 1.0 if goal_number <= self.unlearned_goals else self.learned_fraction
@@ -77,11 +78,17 @@ class ActuatorPlantError:
 
     The actuators play ``M`` times the commanded currents (per actuator gain and phase errors and
     cross-coupling, as ``ppod_sim``'s drive), so a goal ``X`` played with the nominal feed-forward
-    alone is ``P X`` with ``P = G0 M G0^-1`` per harmonic. The feedback corrects a fraction ``s`` of
-    that error, ``X + (1 - s) (P X - X)``: from the correction its learned plant predicts (nothing for
-    the first ``unlearned_goals`` motions, then all but ``learned_residual``), and after
-    ``first_estimate_s`` (the ramp, settling and the first estimate) the rest with time constant
-    ``decay_s`` (the learning iterations). The generator applies at most the fraction ``s_max`` of
+    alone is ``P X`` with ``P = G0 M G0^-1`` per harmonic. The feedback starts a new goal from the
+    correction its learned plant predicts and, after ``first_estimate_s`` (the ramp, settling and the
+    first estimate), corrects the rest with time constant ``decay_s`` (the learning iterations).
+    ``learning`` says what the learned plant predicts: "learner" (the benchmark's): the feedback's
+    own :class:`~ppod_ros.control.learned_plant.PlantLearner`, taught a sample (the currents played
+    and the plate they gave, with ``sample_noise``) at the first estimate and every
+    ``sample_period_s`` after it while a motion plays, so a motion starts exact in the current
+    directions already sampled and partly learned in others (measured against the stack's own
+    feedback loop with the same actuator errors: docs/planner.md, "The plant learned motion by
+    motion"); "goals": nothing for the first ``unlearned_goals`` motions, then all but
+    ``learned_residual``, whatever was played. The generator applies at most the fraction ``s_max`` of
     the correction for which its checker keeps every limit (computed per motion by bisection, as the
     generator scales a correction back): the actuator-side limits through the nominal plant, the
     plate-side ones on the plate the feedback measures (here the true plate) with the nominal
@@ -106,14 +113,35 @@ class ActuatorPlantError:
     first_estimate_s: float = 1.0
     decay_s: float = 1.0
     third_harmonic: float = 0.0
+    # "goals": the first ``unlearned_goals`` motions start uncorrected, every later one
+    # ``learned_residual`` off, whatever was played before. "learner": the feedback's own plant learner
+    # (ppod_ros.control.learned_plant.PlantLearner) is taught one sample at the first estimate and every
+    # ``sample_period_s`` after it while a motion plays (the currents played and what they gave), and a
+    # new motion starts from the correction the plant learned so far predicts for it: exact in the
+    # current directions already excited (a motion played before, or a scaled copy of it), the
+    # actuators' own gains and phases carried over to others (docs/planner.md, "The plant learned
+    # motion by motion").
+    learning: str = "goals"
+    sample_period_s: float = 0.5
+    sample_noise: float = 0.005           # "learner": each sample's measured plate phasors carry complex
+                                          # Gaussian noise of this rms, relative to their own rms (the
+                                          # accelerometer estimate's error), drawn from ``seed``
+    seed: int = 0
 
     def __post_init__(self):
+        from ppod_ros.control.learned_plant import PlantLearner
         from ppod_ros.planning.envelope import _envelope
 
+        if self.learning not in ("goals", "learner"):
+            raise ConfigError(f"ActuatorPlantError.learning: {self.learning!r} is not 'goals' or 'learner'")
         self._checker = _envelope(self.device)  # the planner's shared instance of the one checker
         self._smax: dict[bytes, float] = {}
         self._g0: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         self.scaled_motions = 0               # motions whose corrections the checker scaled back
+        self.learner = PlantLearner()
+        self._learned: dict[tuple, np.ndarray] = {}   # (frequency, harmonics): the learned plant's inverse
+        self._goal, self._taken = -1, 0       # the motion playing (its number) and its samples so far
+        self._rng = np.random.default_rng(self.seed)
 
     @classmethod
     def random(cls, rng: np.random.Generator, device=None, gain: float = 0.15, phase_deg: float = 10.0,
@@ -204,14 +232,59 @@ class ActuatorPlantError:
         return min(self.max_correction(motion), 1.0 - (1.0 - start) * math.exp(-t / self.decay_s)
                    if since_switch_s >= self.first_estimate_s else start)
 
-    def played(self, motion, since_switch_s: float, goal_number: int):
+    def _learned_inverse(self, motion) -> np.ndarray:
+        """The inverse (K, 6, 6) of the plant learned so far at the motion's harmonics (the nominal
+        plant's where the learner has nothing or its plant is not used, as the feedback does)."""
+        from ppod_ros.control.plant import PlantModel
+
+        key = (float(motion.frequency_hz), tuple(int(k) for k in motion.k))
+        if key not in self._learned:
+            G0, G0inv = self._maps(motion)
+            try:
+                model = self.learner.model(PlantModel(motion.frequency_hz, motion.k, G0))
+                self._learned[key] = G0inv if model.source != "learned" else np.linalg.inv(model.G)
+            except (ConfigError, np.linalg.LinAlgError):
+                self._learned[key] = G0inv
+        return self._learned[key]
+
+    def _played_learned(self, motion, since_switch_s: float, goal_number: int, frame_s: float) -> np.ndarray:
+        """``learning == "learner"``: the plate phasors (K, 6) of ``motion`` over the frame of
+        ``frame_s`` from ``since_switch_s`` after the switch to motion number ``goal_number``: the
+        currents start from the learned plant's prediction ``I0 = G^-1 X`` and move towards the exact
+        ``I* = (G0 M)^-1 X`` as the feedback iterates (:meth:`_corrected`); the learner is taught a
+        sample (the currents and what they played) when the frame ends at or after the first estimate
+        and every ``sample_period_s`` after it."""
+        G0, G0inv = self._maps(motion)
+        X = motion.phasors()
+        exact = np.einsum("ij,kjl,kl->ki", np.linalg.inv(self.M), G0inv, X)
+        start = np.einsum("kij,kj->ki", self._learned_inverse(motion), X)
+        s = self._corrected(motion, since_switch_s, 0.0)
+        current = start + s * (exact - start)
+        Y = np.einsum("kij,jl,kl->ki", G0, self.M, current)
+        if goal_number != self._goal:
+            self._goal, self._taken = goal_number, 0
+        if since_switch_s + frame_s >= self.first_estimate_s + self._taken * self.sample_period_s - 1e-9:
+            kmax = int(motion.k.max())
+            goal, measured = (np.zeros((kmax, 6), complex) for _ in range(2))
+            noise = (self._rng.normal(size=Y.shape) + 1j * self._rng.normal(size=Y.shape)) / math.sqrt(2.0)
+            goal[motion.k - 1] = X
+            measured[motion.k - 1] = Y + self.sample_noise * math.sqrt(np.mean(np.abs(Y) ** 2)) * noise
+            if self.learner.observe(motion.frequency_hz, goal, motion.k, current, measured):
+                self._learned.clear()
+            self._taken += 1
+        return Y
+
+    def played(self, motion, since_switch_s: float, goal_number: int, frame_s: float = 0.0):
         if motion is None or motion.is_zero():
             return motion
-        start = 0.0 if goal_number <= self.unlearned_goals else 1.0 - self.learned_residual
-        s = self._corrected(motion, since_switch_s, start)
-        P = self.uncorrected(motion).phasors()
-        X = motion.phasors()
-        Y = X + (1.0 - s) * (P - X)
+        if self.learning == "learner":
+            Y = self._played_learned(motion, since_switch_s, goal_number, frame_s)
+        else:
+            start = 0.0 if goal_number <= self.unlearned_goals else 1.0 - self.learned_residual
+            s = self._corrected(motion, since_switch_s, start)
+            P = self.uncorrected(motion).phasors()
+            X = motion.phasors()
+            Y = X + (1.0 - s) * (P - X)
         if not self.third_harmonic:
             return PlateMotion.from_phasors(motion.frequency_hz, motion.k, Y, name=motion.name)
         # Not predicted by the learned plant (nothing corrected at the start), then learned away.
@@ -317,7 +390,7 @@ def run_on_dynamics(task: Task | SensorlessTask, parts: Sequence[PointPart | Rig
             if r > 0 and since < r:
                 played = crossfade(previous, motion, min(1.0, (since + 0.5 * dt_s) / r))
             if plant is not None:
-                played = plant.played(played, since, motions)
+                played = plant.played(played, since, motions, dt_s)
             if played is not None:
                 state = dyn.advance(played, t, dt_s)
                 for i in np.flatnonzero(state.status != 0):

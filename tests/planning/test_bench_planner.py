@@ -27,7 +27,9 @@ def test_the_multipart_section_runs_both_planners_on_the_same_scenes(tmp_path, c
     assert bench.run(args) == 0
     out = capsys.readouterr().out
     assert "multipart 1, mpc" in out and "multipart 1, template" in out
-    rows = json.loads((tmp_path / "planner.json").read_text())["multipart"]
+    result = json.loads((tmp_path / "planner.json").read_text())
+    assert result["plant_learning"] == "learner"   # the feedback's own plant learner (--plant-learning)
+    rows = result["multipart"]
     assert [r["planner"] for r in rows] == ["mpc", "template"]
     mpc = rows[0]
     assert mpc["count"] == 1 and len(mpc["parts"]) == 1 and 0.2 <= mpc["parts"][0]["mu"] <= 0.45

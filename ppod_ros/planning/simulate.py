@@ -113,16 +113,8 @@ class ActuatorPlantError:
     first_estimate_s: float = 1.0
     decay_s: float = 1.0
     third_harmonic: float = 0.0
-    # "goals": the first ``unlearned_goals`` motions start uncorrected, every later one
-    # ``learned_residual`` off, whatever was played before. "learner": the feedback's own plant learner
-    # (ppod_ros.control.learned_plant.PlantLearner) is taught one sample at the first estimate and every
-    # ``sample_period_s`` after it while a motion plays (the currents played and what they gave), and a
-    # new motion starts from the correction the plant learned so far predicts for it: exact in the
-    # current directions already excited (a motion played before, or a scaled copy of it), the
-    # actuators' own gains and phases carried over to others (docs/planner.md, "The plant learned
-    # motion by motion").
-    learning: str = "goals"
-    sample_period_s: float = 0.5
+    learning: str = "goals"               # "goals" or "learner" (the class docstring)
+    sample_period_s: float = 0.5          # "learner": a sample at the first estimate and every this after it
     sample_noise: float = 0.005           # "learner": each sample's measured plate phasors carry complex
                                           # Gaussian noise of this rms, relative to their own rms (the
                                           # accelerometer estimate's error), drawn from ``seed``
